@@ -1,0 +1,273 @@
+"""Numba kernels: sphere grid, discontinuity membership, colours, bonds and bond rules."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+KIND_INSIDE = 1  # inside a thick discontinuity (red)
+KIND_GREEN = 2  # within 2r of a joint, S.(M - O) >= 0
+KIND_BLUE = 3  # within 2r of a joint, S.(M - O) < 0
+
+
+# ---------------------------------------------------------------------------
+# uniform grid over the spheres (counting sort by cell)
+
+@njit(cache=True)
+def build_grid(c, g0, cs, dims):
+    n = c.shape[0]
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    cell = np.empty(n, np.int64)
+    start = np.zeros(nx * ny * nz + 1, np.int64)
+    for i in range(n):
+        ix = min(max(int((c[i, 0] - g0[0]) / cs), 0), nx - 1)
+        iy = min(max(int((c[i, 1] - g0[1]) / cs), 0), ny - 1)
+        iz = min(max(int((c[i, 2] - g0[2]) / cs), 0), nz - 1)
+        cell[i] = (iz * ny + iy) * nx + ix
+        start[cell[i] + 1] += 1
+    for k in range(nx * ny * nz):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[cell[i]]] = i
+        fill[cell[i]] += 1
+    return start, order
+
+
+@njit(cache=True)
+def _cell_range(lo, hi, g0, cs, dims, a):
+    i0 = min(max(int(math.floor((lo - g0[a]) / cs)), 0), dims[a] - 1)
+    i1 = min(max(int(math.floor((hi - g0[a]) / cs)), 0), dims[a] - 1)
+    return i0, i1
+
+
+# ---------------------------------------------------------------------------
+# discontinuity membership (the paper's equations 13-16)
+
+@njit(cache=True)
+def _disc_test(c, rad, i, M, S, R, d):
+    """Membership kind of sphere i for disc (M, S, R, d) or 0; and signed offset S.(O-M)/|S|."""
+    A, B, C = S[0], S[1], S[2]
+    ns = math.sqrt(A * A + B * B + C * C)
+    mx, my, mz = c[i, 0] - M[0], c[i, 1] - M[1], c[i, 2] - M[2]  # vector MO
+    cx = my * C - mz * B
+    cy = mz * A - mx * C
+    cz = mx * B - my * A
+    off = -(A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])) / ns
+    if math.sqrt(cx * cx + cy * cy + cz * cz) / ns > R:  # eq. 13
+        return 0, off
+    dot = A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])
+    if d != 0.0:
+        if abs(dot) / ns <= d / 2.0:  # eq. 14
+            return KIND_INSIDE, off
+        return 0, off
+    if abs(dot) / ns <= 2.0 * rad[i]:  # eq. 15 / 16
+        return (KIND_GREEN if dot >= 0.0 else KIND_BLUE), off
+    return 0, off
+
+
+@njit(cache=True)
+def _disc_pass(c, rad, start, order, g0, cs, dims, M, S, R, d, rmax, out_s, out_k, out_o, pos):
+    band = d / 2.0 if d != 0.0 else 2.0 * rmax
+    ext = R + band
+    x0, x1 = _cell_range(M[0] - ext, M[0] + ext, g0, cs, dims, 0)
+    y0, y1 = _cell_range(M[1] - ext, M[1] + ext, g0, cs, dims, 1)
+    z0, z1 = _cell_range(M[2] - ext, M[2] + ext, g0, cs, dims, 2)
+    n = 0
+    for iz in range(z0, z1 + 1):
+        for iy in range(y0, y1 + 1):
+            for ix in range(x0, x1 + 1):
+                cell = (iz * dims[1] + iy) * dims[0] + ix
+                for q in range(start[cell], start[cell + 1]):
+                    i = order[q]
+                    k, off = _disc_test(c, rad, i, M, S, R, d)
+                    if k != 0:
+                        if out_s is not None:
+                            out_s[pos + n] = i
+                            out_k[pos + n] = k
+                            out_o[pos + n] = off
+                        n += 1
+    return n
+
+
+@njit(cache=True, parallel=True)
+def count_members(c, rad, start, order, g0, cs, dims, centres, normals, radii, thick, rmax):
+    nd = centres.shape[0]
+    counts = np.zeros(nd, np.int64)
+    for k in prange(nd):
+        counts[k] = _disc_pass(c, rad, start, order, g0, cs, dims, centres[k], normals[k], radii[k], thick[k],
+                               rmax, None, None, None, 0)
+    return counts
+
+
+@njit(cache=True, parallel=True)
+def fill_members(c, rad, start, order, g0, cs, dims, centres, normals, radii, thick, rmax, offsets,
+                 out_s, out_k, out_o):
+    nd = centres.shape[0]
+    for k in prange(nd):
+        _disc_pass(c, rad, start, order, g0, cs, dims, centres[k], normals[k], radii[k], thick[k], rmax,
+                   out_s, out_k, out_o, offsets[k])
+
+
+@njit(cache=True)
+def colours_from_members(n, msph, mdisc, mkind, moff):
+    """Colour and colour source per sphere: red wins; else the nearest joint plane decides.
+
+    Rows are in disc order, so ties in distance go to the lower disc index.
+    """
+    colour = np.zeros(n, np.int8)
+    source = np.full(n, -1, np.int32)
+    best = np.full(n, np.inf)
+    for q in range(len(msph)):
+        i = msph[q]
+        a = abs(moff[q])
+        if mkind[q] == KIND_INSIDE:
+            if colour[i] != 1 or a < best[i]:
+                colour[i] = 1
+                source[i] = mdisc[q]
+                best[i] = a
+        elif colour[i] != 1 and a < best[i]:
+            colour[i] = mkind[q]
+            source[i] = mdisc[q]
+            best[i] = a
+    return colour, source
+
+
+# ---------------------------------------------------------------------------
+# bonds: every pair with centre distance <= (ri + rj)(1 + tol), i < j, sorted
+
+@njit(cache=True)
+def _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, out_j, pos):
+    ix = min(max(int((c[i, 0] - g0[0]) / cs), 0), dims[0] - 1)
+    iy = min(max(int((c[i, 1] - g0[1]) / cs), 0), dims[1] - 1)
+    iz = min(max(int((c[i, 2] - g0[2]) / cs), 0), dims[2] - 1)
+    n = 0
+    for jz in range(max(iz - 1, 0), min(iz + 2, dims[2])):
+        for jy in range(max(iy - 1, 0), min(iy + 2, dims[1])):
+            for jx in range(max(ix - 1, 0), min(ix + 2, dims[0])):
+                cell = (jz * dims[1] + jy) * dims[0] + jx
+                for q in range(start[cell], start[cell + 1]):
+                    j = order[q]
+                    if j <= i:
+                        continue
+                    dx = c[j, 0] - c[i, 0]
+                    dy = c[j, 1] - c[i, 1]
+                    dz = c[j, 2] - c[i, 2]
+                    lim = (rad[i] + rad[j]) * (1.0 + tol)
+                    if dx * dx + dy * dy + dz * dz <= lim * lim:
+                        if out_j is not None:
+                            # insertion keeps each row sorted by j
+                            p = pos + n
+                            while p > pos and out_j[p - 1] > j:
+                                out_j[p] = out_j[p - 1]
+                                p -= 1
+                            out_j[p] = j
+                        n += 1
+    return n
+
+
+@njit(cache=True, parallel=True)
+def count_pairs(c, rad, start, order, g0, cs, dims, tol):
+    n = c.shape[0]
+    counts = np.empty(n, np.int64)
+    for i in prange(n):
+        counts[i] = _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, None, 0)
+    return counts
+
+
+@njit(cache=True, parallel=True)
+def fill_pairs(c, rad, start, order, g0, cs, dims, tol, offsets, out):
+    n = c.shape[0]
+    for i in prange(n):
+        k = _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, out[:, 1], offsets[i])
+        for q in range(offsets[i], offsets[i] + k):
+            out[q, 0] = i
+
+
+# ---------------------------------------------------------------------------
+# bond rules
+
+@njit(cache=True)
+def green_blue_cutter(bonds, cut, colour, source, mstart, mdisc, mkind, moff):
+    """Which discontinuity cut each cut bond under the colour rule (-1 for bonded pairs).
+
+    A red sphere's bonds are cut by its fault.  A green-blue pair is cut by a joint
+    that holds the two spheres on opposite sides (the nearest such joint), or, if
+    their colours come from different joints, by the joint that coloured sphere i.
+    """
+    m = bonds.shape[0]
+    by = np.full(m, -1, np.int32)
+    for b in range(m):
+        if not cut[b]:
+            continue
+        i, j = bonds[b, 0], bonds[b, 1]
+        if colour[i] == 1:
+            by[b] = source[i]
+            continue
+        if colour[j] == 1:
+            by[b] = source[j]
+            continue
+        best = np.inf
+        for p in range(mstart[i], mstart[i + 1]):
+            for q in range(mstart[j], mstart[j + 1]):
+                if mdisc[p] == mdisc[q] and mkind[p] + mkind[q] == 5:  # green + blue
+                    s = abs(moff[p]) + abs(moff[q])
+                    if s < best:
+                        best = s
+                        by[b] = mdisc[p]
+        if by[b] < 0:
+            by[b] = source[i]
+    return by
+
+
+@njit(cache=True)
+def geometric_cuts(c, rad, start, order, g0, cs, dims, bond_start, bonds, colour, source,
+                   centres, normals, radii, thick, lmax):
+    """Geometric rule: cut a bond when a red sphere ends it (by that fault) or when the
+    segment between centres crosses a zero-thickness disc inside its radius (lowest disc id)."""
+    m = bonds.shape[0]
+    by = np.full(m, -1, np.int32)
+    for b in range(m):
+        i, j = bonds[b, 0], bonds[b, 1]
+        if colour[i] == 1:
+            by[b] = source[i]
+        elif colour[j] == 1:
+            by[b] = source[j]
+    for k in range(centres.shape[0]):
+        if thick[k] != 0.0:
+            continue
+        M, S, R = centres[k], normals[k], radii[k]
+        A, B, C = S[0], S[1], S[2]
+        ns = math.sqrt(A * A + B * B + C * C)
+        ext = R + lmax
+        x0, x1 = _cell_range(M[0] - ext, M[0] + ext, g0, cs, dims, 0)
+        y0, y1 = _cell_range(M[1] - ext, M[1] + ext, g0, cs, dims, 1)
+        z0, z1 = _cell_range(M[2] - ext, M[2] + ext, g0, cs, dims, 2)
+        for iz in range(z0, z1 + 1):
+            for iy in range(y0, y1 + 1):
+                for ix in range(x0, x1 + 1):
+                    cell = (iz * dims[1] + iy) * dims[0] + ix
+                    for q in range(start[cell], start[cell + 1]):
+                        i = order[q]
+                        si = A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])
+                        if abs(si) / ns > lmax:
+                            continue
+                        for b in range(bond_start[i], bond_start[i + 1]):
+                            if by[b] >= 0:
+                                continue
+                            j = bonds[b, 1]
+                            sj = A * (M[0] - c[j, 0]) + B * (M[1] - c[j, 1]) + C * (M[2] - c[j, 2])
+                            if (si >= 0.0) == (sj >= 0.0):
+                                continue
+                            t = si / (si - sj)
+                            px = c[i, 0] + t * (c[j, 0] - c[i, 0]) - M[0]
+                            py = c[i, 1] + t * (c[j, 1] - c[i, 1]) - M[1]
+                            pz = c[i, 2] + t * (c[j, 2] - c[i, 2]) - M[2]
+                            qx = py * C - pz * B
+                            qy = pz * A - px * C
+                            qz = px * B - py * A
+                            if math.sqrt(qx * qx + qy * qy + qz * qz) / ns <= R:
+                                by[b] = k
+    return by

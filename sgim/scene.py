@@ -1,0 +1,393 @@
+"""Scene files (TOML): parsing and validation.
+
+Every problem found in a scene raises :class:`SceneError` whose message is one
+line naming the file, the key path and the offending value.  Nothing in this
+module writes files; validation is complete before any output is created.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .geometry import (
+    MeshError,
+    dip_to_normal,
+    facet_degeneracies,
+    load_mesh_file,
+    triangulate_plan,
+)
+
+
+class SceneError(ValueError):
+    """A scene file (or a value in it) is invalid.  ``str(err)`` is one line."""
+
+    def __init__(self, file, key, value, message):
+        self.file, self.key, self.value, self.message = str(file), key, value, message
+        shown = _short(value)
+        super().__init__(f"{self.file}: {key} = {shown}: {message}")
+
+
+def _short(value, limit=80):
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+PACKING_KINDS = ("cubic", "hexagonal", "fcc")
+EXCAVATION_RULES = ("paper", "exact")
+BOND_RULES = ("colour", "geometric")
+OUTPUT_FORMATS = ("npz", "vtu", "txt", "png")
+
+
+@dataclass
+class Domain:
+    min: np.ndarray
+    max: np.ndarray
+
+
+@dataclass
+class Packing:
+    kind: str
+    radius: float
+
+
+@dataclass
+class Surface:
+    """A triangulated excavating surface."""
+
+    name: str
+    vertices: np.ndarray  # (nv, 3) float64
+    faces: np.ndarray  # (nf, 3) int64
+    rule: str
+    key: str  # key path in the scene, for messages
+
+
+@dataclass
+class Disc:
+    """A disc discontinuity (joint when thickness == 0, fault otherwise)."""
+
+    name: str
+    centre: np.ndarray  # (3,)
+    normal: np.ndarray  # (3,) unit
+    radius: float
+    thickness: float
+
+
+@dataclass
+class Bonds:
+    rule: str = "colour"
+    tolerance: float = 1e-3  # relative to ri + rj
+
+
+@dataclass
+class Render:
+    hide_intact: bool = False
+    translucent: bool = False
+    cut_away: list = field(default_factory=list)  # ["x>0", ...]
+    width: int = 1600
+    height: int = 1100
+
+
+@dataclass
+class Scene:
+    path: Path
+    text: str
+    name: str
+    domain: Domain
+    packing: Packing
+    excavations: list
+    discontinuities: list
+    bonds: Bonds
+    formats: tuple
+    render: Render
+
+    @property
+    def n_lattice_sites(self) -> int:
+        from .packing import lattice_for
+
+        return lattice_for(self).n_sites
+
+
+# --------------------------------------------------------------------------
+# value readers: each names the key path of what it reads
+class _Reader:
+    def __init__(self, path):
+        self.path = path
+
+    def err(self, key, value, message):
+        raise SceneError(self.path, key, value, message)
+
+    def table(self, parent, name, key, required=False):
+        if name not in parent:
+            if required:
+                self.err(key, None, "missing table")
+            return {}
+        value = parent[name]
+        if not isinstance(value, dict):
+            self.err(key, value, "must be a table")
+        return value
+
+    def known(self, tab, allowed, key):
+        for k in tab:
+            if k not in allowed:
+                where = f"{key}.{k}" if key else k
+                self.err(where, tab[k], f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+    def number(self, tab, name, key, default=None, positive=False, nonneg=False, lo=None, hi=None):
+        if name not in tab:
+            if default is None:
+                self.err(key, None, "missing value")
+            return float(default)
+        return self.check_number(tab[name], key, positive, nonneg, lo, hi)
+
+    def check_number(self, v, key, positive=False, nonneg=False, lo=None, hi=None):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.err(key, v, "must be a number")
+        v = float(v)
+        if not math.isfinite(v):
+            self.err(key, v, "must be finite")
+        if positive and v <= 0:
+            self.err(key, v, "must be > 0")
+        if nonneg and v < 0:
+            self.err(key, v, "must be >= 0")
+        if lo is not None and v < lo:
+            self.err(key, v, f"must be >= {lo}")
+        if hi is not None and v > hi:
+            self.err(key, v, f"must be <= {hi}")
+        return v
+
+    def vector(self, tab, name, key, n=3, default=None):
+        if name not in tab:
+            if default is None:
+                self.err(key, None, "missing value")
+            return np.asarray(default, float)
+        v = tab[name]
+        if not isinstance(v, list) or len(v) != n:
+            self.err(key, v, f"must be a list of {n} numbers")
+        return np.array([self.check_number(x, f"{key}[{i}]") for i, x in enumerate(v)], float)
+
+    def matrix(self, tab, name, key, ncol, integer=False):
+        v = tab[name]
+        if not isinstance(v, list) or not v:
+            self.err(key, v, f"must be a non-empty list of [{', '.join('abc'[:ncol])}] rows")
+        out = np.empty((len(v), ncol), np.int64 if integer else float)
+        for i, row in enumerate(v):
+            if not isinstance(row, list) or len(row) != ncol:
+                self.err(f"{key}[{i}]", row, f"must be a list of {ncol} numbers")
+            for c, x in enumerate(row):
+                if integer:
+                    if isinstance(x, bool) or not isinstance(x, int):
+                        self.err(f"{key}[{i}]", row, "indices must be integers")
+                    out[i, c] = x
+                else:
+                    out[i, c] = self.check_number(x, f"{key}[{i}]")
+        return out
+
+    def choice(self, tab, name, key, choices, default):
+        v = tab.get(name, default)
+        if v not in choices:
+            self.err(key, v, f"must be one of {', '.join(repr(c) for c in choices)}")
+        return v
+
+    def boolean(self, tab, name, key, default):
+        v = tab.get(name, default)
+        if not isinstance(v, bool):
+            self.err(key, v, "must be true or false")
+        return v
+
+    def string(self, tab, name, key, default):
+        v = tab.get(name, default)
+        if not isinstance(v, str):
+            self.err(key, v, "must be a string")
+        return v
+
+
+TOP_KEYS = {"name", "description", "domain", "packing", "excavation", "discontinuity", "bonds", "output", "render"}
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a scene file; raise SceneError on any problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(path, "(file)", str(path), f"cannot read scene file ({exc.__class__.__name__})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "(toml)", str(exc).split("\n")[0], "not valid TOML") from None
+    return scene_from_dict(data, path, text)
+
+
+def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
+    path = Path(path)
+    rd = _Reader(path)
+    rd.known(data, TOP_KEYS, "")
+    name = rd.string(data, "name", "name", path.stem)
+
+    dom = rd.table(data, "domain", "domain", required=True)
+    rd.known(dom, {"min", "max"}, "domain")
+    lo = rd.vector(dom, "min", "domain.min")
+    hi = rd.vector(dom, "max", "domain.max")
+    for a in range(3):
+        if hi[a] <= lo[a]:
+            rd.err(f"domain.max[{a}]", float(hi[a]), f"must exceed domain.min[{a}] = {lo[a]:g} (empty or inverted box)")
+    domain = Domain(lo, hi)
+
+    pk = rd.table(data, "packing", "packing", required=True)
+    rd.known(pk, {"kind", "radius"}, "packing")
+    kind = rd.choice(pk, "kind", "packing.kind", PACKING_KINDS, "cubic")
+    radius = rd.number(pk, "radius", "packing.radius", positive=True)
+    if 2 * radius > float(np.min(hi - lo)):
+        rd.err("packing.radius", radius, f"spheres of diameter {2 * radius:g} do not fit in the domain")
+    packing = Packing(kind, radius)
+
+    excavations = []
+    exc_list = data.get("excavation", [])
+    if not isinstance(exc_list, list):
+        rd.err("excavation", exc_list, "must be an array of tables ([[excavation]])")
+    for k, ex in enumerate(exc_list):
+        excavations.append(_read_surface(rd, ex, f"excavation[{k}]", domain, path))
+
+    discs = []
+    d_list = data.get("discontinuity", [])
+    if not isinstance(d_list, list):
+        rd.err("discontinuity", d_list, "must be an array of tables ([[discontinuity]])")
+    for k, dt in enumerate(d_list):
+        discs.append(_read_disc(rd, dt, f"discontinuity[{k}]", domain, radius))
+
+    bt = rd.table(data, "bonds", "bonds")
+    rd.known(bt, {"rule", "tolerance"}, "bonds")
+    bonds = Bonds(
+        rule=rd.choice(bt, "rule", "bonds.rule", BOND_RULES, "colour"),
+        tolerance=rd.number(bt, "tolerance", "bonds.tolerance", default=1e-3, nonneg=True, hi=0.2),
+    )
+
+    ot = rd.table(data, "output", "output")
+    rd.known(ot, {"formats"}, "output")
+    formats = ot.get("formats", list(OUTPUT_FORMATS))
+    if not isinstance(formats, list) or any(f not in OUTPUT_FORMATS for f in formats):
+        rd.err("output.formats", formats, f"must be a list drawn from {', '.join(OUTPUT_FORMATS)}")
+    if "npz" not in formats:
+        formats = ["npz", *formats]
+
+    rt = rd.table(data, "render", "render")
+    rd.known(rt, {"hide_intact", "translucent", "cut_away", "width", "height"}, "render")
+    cut = rt.get("cut_away", [])
+    if isinstance(cut, str):
+        cut = [cut]
+    if not isinstance(cut, list):
+        rd.err("render.cut_away", cut, "must be a string like 'y>0' or a list of them")
+    for c in cut:
+        try:
+            parse_cut(c)
+        except ValueError as exc:
+            rd.err("render.cut_away", c, str(exc))
+    render = Render(
+        hide_intact=rd.boolean(rt, "hide_intact", "render.hide_intact", False),
+        translucent=rd.boolean(rt, "translucent", "render.translucent", False),
+        cut_away=cut,
+        width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
+        height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)),
+    )
+    return Scene(path, text, name, domain, packing, excavations, discs, bonds, tuple(formats), render)
+
+
+def parse_cut(expr):
+    """'x>0' / 'z<=40' -> (axis, sign, value): spheres with sign*(c[axis]-value) > 0 are cut away."""
+    if not isinstance(expr, str):
+        raise ValueError("must be a string like 'y>0'")
+    e = expr.replace(" ", "").replace("=", "")
+    if len(e) < 3 or e[0] not in "xyz" or e[1] not in "<>":
+        raise ValueError("must look like 'x>0', 'y<10' or 'z>100'")
+    try:
+        value = float(e[2:])
+    except ValueError:
+        raise ValueError("must look like 'x>0', 'y<10' or 'z>100'") from None
+    if not math.isfinite(value):
+        raise ValueError("the value must be finite")
+    return "xyz".index(e[0]), (1.0 if e[1] == ">" else -1.0), value
+
+
+def _read_surface(rd, ex, key, domain, scene_path):
+    if not isinstance(ex, dict):
+        rd.err(key, ex, "must be a table")
+    rd.known(ex, {"name", "vertices", "faces", "points", "file", "rule"}, key)
+    name = rd.string(ex, "name", f"{key}.name", key)
+    rule = rd.choice(ex, "rule", f"{key}.rule", EXCAVATION_RULES, "paper")
+    forms = [f for f in ("vertices", "points", "file") if f in ex]
+    if len(forms) != 1:
+        rd.err(key, sorted(ex), "give exactly one of: vertices+faces, points, file")
+    form = forms[0]
+    if form == "vertices":
+        if "faces" not in ex:
+            rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
+        verts = rd.matrix(ex, "vertices", f"{key}.vertices", 3)
+        faces = rd.matrix(ex, "faces", f"{key}.faces", 3, integer=True)
+        bad = np.nonzero((faces < 0) | (faces >= len(verts)))[0]
+        if bad.size:
+            i = int(bad[0])
+            rd.err(f"{key}.faces[{i}]", faces[i].tolist(), f"vertex index out of range 0..{len(verts) - 1}")
+        face_key = f"{key}.faces"
+    elif form == "points":
+        if "faces" in ex:
+            rd.err(f"{key}.faces", ex["faces"], "faces go with vertices, not with points")
+        pts = rd.matrix(ex, "points", f"{key}.points", 3)
+        try:
+            verts, faces = triangulate_plan(pts)
+        except MeshError as exc:
+            rd.err(f"{key}.points{exc.where}", exc.value, exc.message)
+        face_key = f"{key}.points (triangle"
+    else:
+        if "faces" in ex:
+            rd.err(f"{key}.faces", ex["faces"], "faces go with vertices, not with file")
+        fname = rd.string(ex, "file", f"{key}.file", "")
+        fpath = Path(fname)
+        if not fpath.is_absolute():
+            fpath = Path(scene_path).parent / fpath
+        try:
+            verts, faces = load_mesh_file(fpath)
+        except MeshError as exc:
+            rd.err(f"{key}.file", fname, exc.message)
+        face_key = f"{key}.file {fname} (face"
+    bad = facet_degeneracies(verts, faces)
+    if bad.size:
+        i = int(bad[0])
+        where = f"{face_key}[{i}]" + (")" if "(" in face_key else "")
+        rd.err(where, verts[faces[i]].tolist(), "facet points are repeated or collinear")
+    vmin, vmax = verts.min(0), verts.max(0)
+    if np.any(vmax[:2] < domain.min[:2]) or np.any(vmin[:2] > domain.max[:2]) or vmin[2] > domain.max[2] \
+            or vmax[2] < domain.min[2]:
+        rd.err(key, [vmin.tolist(), vmax.tolist()], "surface lies entirely outside the domain box")
+    return Surface(name, verts, faces, rule, key)
+
+
+def _read_disc(rd, dt, key, domain, r):
+    if not isinstance(dt, dict):
+        rd.err(key, dt, "must be a table")
+    rd.known(dt, {"name", "centre", "center", "dip", "dip_direction", "normal", "radius", "thickness"}, key)
+    name = rd.string(dt, "name", f"{key}.name", key)
+    cname = "centre" if "centre" in dt or "center" not in dt else "center"
+    centre = rd.vector(dt, cname, f"{key}.{cname}")
+    has_dip = "dip" in dt or "dip_direction" in dt
+    if has_dip and "normal" in dt:
+        rd.err(f"{key}.normal", dt["normal"], "give either dip + dip_direction or normal, not both")
+    if "normal" in dt:
+        n = rd.vector(dt, "normal", f"{key}.normal")
+        length = float(np.linalg.norm(n))
+        if not length > 1e-12 * max(1.0, float(np.abs(n).max())):
+            rd.err(f"{key}.normal", n.tolist(), "normal must not be the zero vector")
+        normal = n / length
+    else:
+        dip = rd.number(dt, "dip", f"{key}.dip", lo=0.0, hi=90.0)
+        dd = rd.number(dt, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
+        normal = dip_to_normal(dip, dd)
+    radius = rd.number(dt, "radius", f"{key}.radius", positive=True)
+    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True)
+    band = max(thick / 2, 2 * r) + radius
+    if np.any(centre + band < domain.min) or np.any(centre - band > domain.max):
+        rd.err(f"{key}.centre", centre.tolist(), "discontinuity lies entirely outside the domain box")
+    return Disc(name, centre, normal, radius, thick)
