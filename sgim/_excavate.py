@@ -33,11 +33,18 @@ RULE_PAPER = 0.0
 RULE_EXACT = 1.0
 
 
+# The paper's "<=" tests (eq. 7 and 11) describe closed prisms.  Evaluated literally in
+# floating point, a site lying exactly on an edge shared by two facets can fail the test
+# of both facets by one rounding error, leaving whole rows of sites standing above the
+# surface.  Each closed comparison therefore allows ROUND times the magnitude of its terms.
+ROUND = 1e-12
+
+
 @njit(cache=True, inline="always")
 def _slab(pc, f, k, x, y, z):
     b = 4 + 5 * k
     a, bb, c, d, d0 = pc[f, b], pc[f, b + 1], pc[f, b + 2], pc[f, b + 3], pc[f, b + 4]
-    w = abs(d - d0)
+    w = abs(d - d0) + ROUND * (abs(a * x) + abs(bb * y) + abs(c * z) + abs(d) + abs(d0))
     return abs(a * x + bb * y + c * z + d) <= w and abs(a * x + bb * y + c * z + d0) <= w
 
 
@@ -49,7 +56,8 @@ def paper_hit(pc, f, x, y, z, r):
         if _slab(pc, f, 0, x, y, z) and _slab(pc, f, 1, x, y, z) and _slab(pc, f, 2, x, y, z):
             return True
     if C0 != 0.0:
-        if z >= -(A0 * x + B0 * y + D0) / C0:
+        h = -(A0 * x + B0 * y + D0) / C0
+        if z >= h - ROUND * (abs(z) + abs(h)):
             if _slab(pc, f, 3, x, y, z) and _slab(pc, f, 4, x, y, z) and _slab(pc, f, 5, x, y, z):
                 return True
     return False
@@ -58,6 +66,11 @@ def paper_hit(pc, f, x, y, z, r):
 @njit(cache=True)
 def _plan_side(ax, ay, bx, by, x, y):
     return (bx - ax) * (y - ay) - (by - ay) * (x - ax)
+
+
+@njit(cache=True)
+def _plan_side_tol(ax, ay, bx, by, x, y):
+    return ROUND * (abs((bx - ax) * (y - ay)) + abs((by - ay) * (x - ax)))
 
 
 @njit(cache=True)
@@ -114,10 +127,13 @@ def exact_above(ec, f, x, y, z):
     s1 = _plan_side(ax, ay, bx, by, x, y)
     s2 = _plan_side(bx, by, cx, cy, x, y)
     s3 = _plan_side(cx, cy, ax, ay, x, y)
-    if not ((s1 >= 0.0 and s2 >= 0.0 and s3 >= 0.0) or (s1 <= 0.0 and s2 <= 0.0 and s3 <= 0.0)):
+    t1 = _plan_side_tol(ax, ay, bx, by, x, y)
+    t2 = _plan_side_tol(bx, by, cx, cy, x, y)
+    t3 = _plan_side_tol(cx, cy, ax, ay, x, y)
+    if not ((s1 >= -t1 and s2 >= -t2 and s3 >= -t3) or (s1 <= t1 and s2 <= t2 and s3 <= t3)):
         return False
     h = ec[f, 2] - (ec[f, 9] * (x - ax) + ec[f, 10] * (y - ay)) / nz
-    return z >= h
+    return z >= h - ROUND * (abs(z) + abs(h))
 
 
 @njit(cache=True)

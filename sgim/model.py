@@ -116,7 +116,7 @@ class SphereModel:
             },
         )
         with atomic_path(path) as tmp:
-            meshio.write(tmp, mesh, file_format="vtu", binary=True)
+            meshio.write(tmp, mesh, file_format="vtu", binary=True, compression=None)
 
     def save_text(self, balls_path, bonds_path):
         """PFC-style text: 'id x y z r colour' per ball, 'id1 id2 bonded cut_by' per contact (1-based ids)."""

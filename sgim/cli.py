@@ -1,0 +1,188 @@
+"""Command line: ``sgim build | show | info``.
+
+Bad input prints one line naming the file, key and value, exits with status 2 and
+leaves no output behind (the output folder is assembled under a temporary name and
+renamed into place only when everything is written).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+
+
+class CliError(Exception):
+    """One-line error for the user (exit status 2)."""
+
+
+def _progress(quiet):
+    if quiet:
+        return None
+    t0 = time.perf_counter()
+
+    def say(msg):
+        print(f"[{time.perf_counter() - t0:7.2f} s] {msg}", file=sys.stderr, flush=True)
+
+    return say
+
+
+def cmd_build(args):
+    from .build import Timer, build_model, summary
+    from .scene import load_scene
+
+    t0 = time.perf_counter()
+    say = _progress(args.quiet)
+    scene = load_scene(args.scene)  # SceneError before anything is created
+    formats = args.formats.split(",") if args.formats else list(scene.formats)
+    bad = [f for f in formats if f not in ("npz", "vtu", "txt", "png")]
+    if bad:
+        raise CliError(f"--formats: unknown format {bad[0]!r} (choose from npz, vtu, txt, png)")
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"{out}: output exists and is not a folder")
+    timer = Timer(say)
+    timer.t["parse"] = time.perf_counter() - t0
+    if say:
+        say(f"parse      {timer.t['parse']:7.2f} s  {args.scene}")
+    model = build_model(scene, timer=timer)
+    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        model.save(tmp / "model.npz")
+        timer.lap("write npz", str(out / "model.npz"))
+        if "vtu" in formats:
+            model.save_vtu(tmp / "model.vtu")
+            timer.lap("write vtu")
+        if "txt" in formats:
+            model.save_text(tmp / "balls.txt", tmp / "bonds.txt")
+            timer.lap("write txt")
+        if "png" in formats:
+            from .render import render
+
+            rs = scene.render
+            render(model, tmp / "model.png", hide_intact=rs.hide_intact, translucent=rs.translucent,
+                   cut_away=rs.cut_away, width=rs.width, height=rs.height, title=scene.name)
+            timer.lap("render", str(out / "model.png"))
+        info = summary(model, timer.t)
+        info["timings_s"]["total"] = round(time.perf_counter() - t0, 4)
+        (tmp / "summary.json").write_text(json.dumps(info, indent=2))
+        if out.exists():
+            old = out.with_name(f".{out.name}.old{os.getpid()}")
+            os.replace(out, old)
+            os.replace(tmp, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if args.json:
+        print(json.dumps(info, indent=2))
+    elif not args.quiet:
+        c = model.counts()
+        print(f"{out}: {c['spheres']} spheres ({c['intact']} intact, {c['red']} red, {c['green']} green, "
+              f"{c['blue']} blue), {c['bonds']} contacts ({c['bonded']} bonded, {c['cut']} cut) "
+              f"in {info['timings_s']['total']:.2f} s")
+    return 0
+
+
+def _load_model(path):
+    from .model import SphereModel
+
+    p = Path(path)
+    if not p.is_file():
+        raise CliError(f"{p}: MODEL = {str(path)!r}: file not found")
+    try:
+        return SphereModel.load(p)
+    except Exception as exc:  # a broken or foreign file
+        raise CliError(f"{p}: MODEL = {str(path)!r}: not a readable model.npz ({exc.__class__.__name__})") from None
+
+
+def cmd_show(args):
+    from .render import render
+    from .scene import parse_cut
+
+    for c in args.cut_away:
+        try:
+            parse_cut(c)
+        except ValueError as exc:
+            raise CliError(f"--cut-away = {c!r}: {exc}") from None
+    model = _load_model(args.model)
+    out = Path(args.output)
+    if out.parent and not out.parent.exists():
+        raise CliError(f"{out}: -o = {str(out)!r}: folder {out.parent} does not exist")
+    res = render(model, out, hide_intact=args.hide_intact, translucent=args.translucent, cut_away=args.cut_away,
+                 width=args.width, height=args.height, title=model.meta.get("scene"))
+    if not args.quiet:
+        print(f"{out}: {res['drawn']} spheres drawn of {res['selected']} selected")
+    return 0
+
+
+def cmd_info(args):
+    model = _load_model(args.model)
+    c = model.counts()
+    if args.json:
+        print(json.dumps({**c, "meta": model.meta}, indent=2))
+        return 0
+    m = model.meta
+    pk = m.get("packing", {})
+    print(f"model      {args.model}")
+    print(f"scene      {m.get('scene', '?')}  ({m.get('generator', '?')})")
+    print(f"packing    {pk.get('kind', '?')}  r = {pk.get('radius', '?')}  lattice sites {pk.get('lattice_sites', '?')}")
+    print(f"spheres    {c['spheres']}  intact {c['intact']}  red {c['red']}  green {c['green']}  blue {c['blue']}")
+    print(f"contacts   {c['bonds']}  bonded {c['bonded']}  cut {c['cut']}  (rule {m.get('bonds', {}).get('rule', '?')})")
+    print(f"discs      {c['discontinuities']}  memberships {c['memberships']}")
+    for k, name in enumerate(model.disc_name):
+        kind = "fault" if model.disc_thickness[k] > 0 else "joint"
+        print(f"  [{k}] {name} ({kind}, R = {model.disc_radius[k]:g}, d = {model.disc_thickness[k]:g})")
+    return 0
+
+
+def make_parser():
+    p = argparse.ArgumentParser(prog="sgim", description="Sphere generator for irregular geological models")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    b = sub.add_parser("build", help="build a sphere model from a scene file")
+    b.add_argument("scene")
+    b.add_argument("-o", "--output", required=True, help="output folder")
+    b.add_argument("--quiet", action="store_true", help="no progress lines")
+    b.add_argument("--json", action="store_true", help="print a JSON summary (counts, bonds, timings)")
+    b.add_argument("--formats", help="comma list of npz,vtu,txt,png (default: the scene's [output] formats)")
+    b.set_defaults(func=cmd_build)
+    s = sub.add_parser("show", help="render a model to PNG")
+    s.add_argument("model")
+    s.add_argument("-o", "--output", required=True)
+    s.add_argument("--hide-intact", action="store_true")
+    s.add_argument("--translucent", action="store_true", help="draw intact spheres translucent")
+    s.add_argument("--cut-away", action="append", default=[], metavar="EXPR",
+                   help="remove spheres where EXPR holds, e.g. 'y<0' (repeatable)")
+    s.add_argument("--width", type=int, default=1600)
+    s.add_argument("--height", type=int, default=1100)
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(func=cmd_show)
+    i = sub.add_parser("info", help="summarise a model")
+    i.add_argument("model")
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=cmd_info)
+    return p
+
+
+def main(argv=None):
+    from .scene import SceneError
+
+    args = make_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (SceneError, CliError) as exc:
+        print(f"sgim: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())
