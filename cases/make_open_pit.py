@@ -170,7 +170,7 @@ def toml_text():
         "[render]",
         "hide_intact = false",
         "translucent = false",
-        'cut_away = ["y<-10"]',
+        'cut_away = []  # e.g. ["y<-10"] to see inside',
         "",
     ]
     for d in discontinuities():

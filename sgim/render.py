@@ -66,11 +66,13 @@ def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_a
     pl.add_mesh(outline, style="wireframe", color="grey", line_width=1)
     if title:
         pl.add_text(title, font_size=10, color="black")
-    pl.camera_position = "iso"
-    pl.camera.azimuth = -30
-    pl.camera.elevation = 8
+    # look from the south-south-east, 35 degrees above the horizon
+    centre = (lo + hi) / 2
+    az, el = np.radians(-150.0), np.radians(35.0)
+    eye = centre + 2.2 * span * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    pl.camera_position = [tuple(eye), tuple(centre), (0.0, 0.0, 1.0)]
     pl.reset_camera()
-    pl.camera.zoom(1.25)
+    pl.camera.zoom(1.35)
     with atomic_path(path) as tmp:
         pl.screenshot(tmp + ".png")
         import os
