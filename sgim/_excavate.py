@@ -70,7 +70,9 @@ def _plan_side(ax, ay, bx, by, x, y):
 
 @njit(cache=True)
 def _plan_side_tol(ax, ay, bx, by, x, y):
-    return ROUND * (abs((bx - ax) * (y - ay)) + abs((by - ay) * (x - ax)))
+    # scaled by the coordinates (not by the products, which vanish near the edge), so that a
+    # column that rounding puts one ulp outside a surface covering the domain belongs to it
+    return ROUND * (abs(bx - ax) + abs(by - ay)) * (abs(x) + abs(y) + abs(ax) + abs(ay))
 
 
 @njit(cache=True)
@@ -186,10 +188,9 @@ def _column_bounds(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny, 
     """(zlo, zhi, cell): sites below zlo are kept, sites at/above zhi removed, in between tested."""
     zlo = np.inf
     zhi = np.inf
-    ix = int((x - g0x) / gs)
-    iy = int((y - g0y) / gs)
-    if ix < 0 or iy < 0 or ix >= gnx or iy >= gny:
-        return zlo, zhi, -1
+    # clamp like bin_facets: a column on the box face may round one ulp past the grid
+    ix = min(max(int(math.floor((x - g0x) / gs)), 0), gnx - 1)
+    iy = min(max(int(math.floor((y - g0y) / gs)), 0), gny - 1)
     cell = iy * gnx + ix
     for q in range(cell_start[cell], cell_start[cell + 1]):
         f = cell_facets[q]
@@ -274,15 +275,21 @@ def fill_columns(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
 
 
 @njit(cache=True)
+def _clamped_range(lo, hi, g0, gs, n):
+    """Cells [i0, i1] covering [lo, hi], clamped into the grid like the column lookup."""
+    i0 = min(max(int(math.floor((lo - g0) / gs)), 0), n - 1)
+    i1 = min(max(int(math.floor((hi - g0) / gs)), 0), n - 1)
+    return i0, i1
+
+
+@njit(cache=True)
 def bin_facets(fb, g0x, g0y, gs, gnx, gny, pad):
     """CSR lists of the facets whose padded plan box overlaps each grid cell."""
     nf = fb.shape[0]
     counts = np.zeros(gnx * gny + 1, np.int64)
     for f in range(nf):
-        i0 = max(0, int((fb[f, 0] - pad - g0x) / gs))
-        i1 = min(gnx - 1, int((fb[f, 1] + pad - g0x) / gs))
-        j0 = max(0, int((fb[f, 2] - pad - g0y) / gs))
-        j1 = min(gny - 1, int((fb[f, 3] + pad - g0y) / gs))
+        i0, i1 = _clamped_range(fb[f, 0] - pad, fb[f, 1] + pad, g0x, gs, gnx)
+        j0, j1 = _clamped_range(fb[f, 2] - pad, fb[f, 3] + pad, g0y, gs, gny)
         for j in range(j0, j1 + 1):
             for i in range(i0, i1 + 1):
                 counts[j * gnx + i + 1] += 1
@@ -290,10 +297,8 @@ def bin_facets(fb, g0x, g0y, gs, gnx, gny, pad):
     fill = start[:-1].copy()
     items = np.empty(start[-1], np.int64)
     for f in range(nf):
-        i0 = max(0, int((fb[f, 0] - pad - g0x) / gs))
-        i1 = min(gnx - 1, int((fb[f, 1] + pad - g0x) / gs))
-        j0 = max(0, int((fb[f, 2] - pad - g0y) / gs))
-        j1 = min(gny - 1, int((fb[f, 3] + pad - g0y) / gs))
+        i0, i1 = _clamped_range(fb[f, 0] - pad, fb[f, 1] + pad, g0x, gs, gnx)
+        j0, j1 = _clamped_range(fb[f, 2] - pad, fb[f, 3] + pad, g0y, gs, gny)
         for j in range(j0, j1 + 1):
             for i in range(i0, i1 + 1):
                 c = j * gnx + i

@@ -6,6 +6,7 @@ given as dip / dip direction (degrees) has the upward unit normal
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +79,9 @@ def load_mesh_file(path):
     if not path.is_file():
         raise MeshError("file not found")
     try:
-        mesh = meshio.read(str(path))
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            mesh = meshio.read(str(path))
     except Exception as exc:  # meshio raises many kinds
         raise MeshError(f"unreadable mesh file ({exc.__class__.__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
     tris = [c.data for c in mesh.cells if c.type == "triangle"]
