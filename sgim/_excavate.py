@@ -37,6 +37,9 @@ RULE_EXACT = 1.0
 # floating point, a site lying exactly on an edge shared by two facets can fail the test
 # of both facets by one rounding error, leaving whole rows of sites standing above the
 # surface.  Each closed comparison therefore allows ROUND times the magnitude of its terms.
+# The strict "distance < r" tests are tightened by the same amount: a site at distance
+# exactly r (common: lattice layers at z.5 under berms at whole metres with r = 0.5) is
+# kept, as the strict inequality says, instead of being removed or kept by rounding.
 ROUND = 1e-12
 
 
@@ -52,7 +55,8 @@ def _slab(pc, f, k, x, y, z):
 def paper_hit(pc, f, x, y, z, r):
     """True when (x, y, z) lies in the paper's excavating space of facet f (eq. 7 and 11)."""
     A0, B0, C0, D0 = pc[f, 0], pc[f, 1], pc[f, 2], pc[f, 3]
-    if abs(A0 * x + B0 * y + C0 * z + D0) / math.sqrt(A0 * A0 + B0 * B0 + C0 * C0) < r:
+    nn = math.sqrt(A0 * A0 + B0 * B0 + C0 * C0)
+    if abs(A0 * x + B0 * y + C0 * z + D0) / nn < r - ROUND * (abs(A0 * x) + abs(B0 * y) + abs(C0 * z) + abs(D0)) / nn:
         if _slab(pc, f, 0, x, y, z) and _slab(pc, f, 1, x, y, z) and _slab(pc, f, 2, x, y, z):
             return True
     if C0 != 0.0:
@@ -142,7 +146,14 @@ def exact_above(ec, f, x, y, z):
 def exact_hit(ec, f, x, y, z, r):
     if exact_above(ec, f, x, y, z):
         return True
-    return tri_dist2(ec, f, x, y, z) < r * r
+    return tri_dist2(ec, f, x, y, z) < r * r - _dist2_round(ec, f, x, y, z)
+
+
+@njit(cache=True)
+def _dist2_round(ec, f, x, y, z):
+    """Rounding allowance of a squared distance from (x, y, z) to facet f (see ROUND)."""
+    s = abs(x) + abs(y) + abs(z) + abs(ec[f, 0]) + abs(ec[f, 1]) + abs(ec[f, 2])
+    return ROUND * s * s
 
 
 @njit(cache=True)

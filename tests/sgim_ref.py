@@ -29,7 +29,10 @@ same allowance:
   (scaled by the coordinates, not by the terms, which vanish near the edge: a lattice row
   that rounding puts one ulp outside a surface covering the domain exactly belongs to it)
 
-Strict comparisons (distance "< r") get no allowance.  With random float input the
+Strict comparisons (distance "< r") are tightened by the same kind of allowance, so a site at
+distance exactly r is kept as the strict inequality says:
+      paper:  |A0 x + B0 y + C0 z + D0| / |n| < r - ROUND (|A0 x| + |B0 y| + |C0 z| + |D0|) / |n|
+      exact:  dist^2 < r^2 - ROUND (|x| + |y| + |z| + |ax| + |ay| + |az|)^2   (a: first vertex)  With random float input the
 allowance changes nothing but a set of measure ~1e-12; it only matters for sites placed
 exactly on facet edges, which the regression tests build on purpose.
 """
@@ -108,8 +111,10 @@ def paper_space(sites, tri, r):
     L1 = (L0[0] + A0, L0[1] + B0, L0[2] + C0)
     M1 = (M0[0] + A0, M0[1] + B0, M0[2] + C0)
     # steps 3-4 (eq. 6-8)
-    dist = np.abs(A0 * x + B0 * y + C0 * z + D0) / math.sqrt(A0 * A0 + B0 * B0 + C0 * C0)
-    s1 = (dist < r) & _slab(x, y, z, L0, L1, M0, N0) & _slab(x, y, z, M0, M1, N0, L0) \
+    nn = math.sqrt(A0 * A0 + B0 * B0 + C0 * C0)
+    dist = np.abs(A0 * x + B0 * y + C0 * z + D0) / nn
+    slack = ROUND * (np.abs(A0 * x) + np.abs(B0 * y) + np.abs(C0 * z) + abs(D0)) / nn
+    s1 = (dist < r - slack) & _slab(x, y, z, L0, L1, M0, N0) & _slab(x, y, z, M0, M1, N0, L0) \
         & _slab(x, y, z, L0, L1, N0, M0)
     # steps 5-7 (eq. 9-12): the vertical prism, only when C0 != 0
     if C0 == 0.0:
@@ -173,7 +178,9 @@ def above_triangle(p, tri):
 
 
 def exact_space(sites, tri, r):
-    return above_triangle(sites, tri) | (triangle_dist2(sites, tri) < r * r)
+    a = np.asarray(tri[0], float)
+    scale = np.abs(sites).sum(1) + np.abs(a).sum()
+    return above_triangle(sites, tri) | (triangle_dist2(sites, tri) < r * r - ROUND * scale * scale)
 
 
 def removed_mask(sites, surfaces, r):

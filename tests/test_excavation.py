@@ -17,6 +17,7 @@ import pytest
 import sgim_ref as ref
 import sgim_scenes as gen
 from sgim.excavate import FacetSet, kept_sites
+from sgim.geometry import triangulate_plan
 from sgim.packing import make_lattice
 from sgim.scene import Surface
 
@@ -331,3 +332,19 @@ def test_domain_aligned_terrain_grid(lo, hi, r, m, rule):
     assert len(standing) == 0, f"{len(standing)} sites kept above a flat terrain, e.g. {standing[:3].tolist()}"
     sites = ref.cubic_sites(lo, hi, r)
     assert_same_sites(got, ref.kept(sites, [(verts, faces, rule)], r))
+
+
+@pytest.mark.parametrize("rule", ["paper", "exact"])
+def test_layer_at_distance_exactly_r_is_kept(rule):
+    """The rules remove a site closer than r ("<", strict).  Under a flat terrain at a whole
+    metre, the lattice layer at z.5 with r = 0.5 lies at distance exactly r: every one of its
+    sites must be kept (before the fix rounding removed a random part of the layer)."""
+    rng = np.random.default_rng(1)
+    xy = np.round(rng.uniform(-1, 11, (40, 2)), 3)
+    xy = np.vstack([xy, [[-1, -1], [11, -1], [11, 11], [-1, 11]]])
+    verts, faces = triangulate_plan(np.column_stack([xy, np.full(len(xy), 90.0)]))
+    lo, hi = np.array([0.0, 0.0, 80.0]), np.array([10.0, 10.0, 92.0])
+    got = sgim_kept("cubic", lo, hi, 0.5, [(verts, faces, rule)])
+    layer = np.isclose(got[:, 2], 89.5, rtol=0, atol=1e-9)
+    assert layer.sum() == 100
+    assert got[:, 2].max() == 89.5
