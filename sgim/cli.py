@@ -34,15 +34,15 @@ def _progress(quiet):
 
 def cmd_build(args):
     from .build import Timer, build_model, summary
-    from .scene import load_scene
+    from .scene import OUTPUT_FORMATS, load_scene
 
     t0 = time.perf_counter()
     say = _progress(args.quiet)
     scene = load_scene(args.scene)  # SceneError before anything is created
     formats = args.formats.split(",") if args.formats else list(scene.formats)
-    bad = [f for f in formats if f not in ("npz", "vtu", "txt", "png")]
+    bad = [f for f in formats if f not in OUTPUT_FORMATS]
     if bad:
-        raise CliError(f"--formats: unknown format {bad[0]!r} (choose from npz, vtu, txt, png)")
+        raise CliError(f"--formats: unknown format {bad[0]!r} (choose from {', '.join(OUTPUT_FORMATS)})")
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: output exists and is not a folder")
