@@ -1,0 +1,284 @@
+"""DDA scene files (TOML): parsing and validation into blocks, materials, contact laws and run settings.
+
+Every problem raises :class:`sgim.scene.SceneError` (one line naming file, key and value) before anything is
+written. Keys::
+
+    name = "incline"
+    [simulation]   duration (s, required), dt (0 or absent: automatic), safety = 0.5, gravity = [0, 0, -9.81],
+                   local_damping = 0.0, record_every (default duration / 100), frames = 20 (VTU frames)
+    [contact]      default law: kn (N/m per contact point, required), ks (default kn / 2), friction (deg),
+                   cohesion (Pa), tensile (Pa), damping (ratio of critical)
+    [[material]]   name, density (kg/m3) = 2600, E = 1e10, nu = 0.25
+    [[contact_pair]]  materials = ["a", "b"] and any [contact] key: the law between those two materials
+    [[block]]      one of: shape = "cube" + size (+ center, rotation_axis, rotation_angle, width, height, sides);
+                   vertices + faces (0-based, counter-clockwise seen from outside); file = "mesh.stl" (convex);
+                   and name, fixed, material, velocity, angular_velocity
+    [[generate]]   kind = one of dda.generate.GENERATORS, the other keys are its parameters
+    [output]       formats = ["npz", "csv", "vtu", "png"]
+    [render]       width = 1600, height = 1100
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sgim.scene import SceneError, _Reader
+
+from .simulation import ContactLaw
+
+OUTPUT_FORMATS = ("npz", "csv", "vtu", "png")
+TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact_pair", "block", "generate",
+            "output", "render"}
+LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
+
+
+@dataclass
+class Material:
+    name: str
+    density: float = 2600.0
+    E: float = 1e10
+    nu: float = 0.25
+
+
+@dataclass
+class DDAScene:
+    path: Path
+    text: str
+    name: str
+    blocks: list  # BlockSpec
+    materials: dict
+    law: ContactLaw
+    pair_laws: dict
+    duration: float
+    dt: float | None
+    safety: float
+    gravity: np.ndarray
+    local_damping: float
+    record_every: float
+    frames: int
+    formats: tuple
+    width: int = 1600
+    height: int = 1100
+    sources: list = field(default_factory=list)  # scene key that produced each block
+
+    def build(self):
+        """BlockSystem and Simulation of the scene."""
+        from .simulation import Simulation
+        from .system import BlockSystem
+
+        bs = BlockSystem()
+        for spec in self.blocks:
+            m = self.materials.get(spec.material) or Material(spec.material)
+            bs.add_block(spec, density=m.density, E=m.E, nu=m.nu)
+        sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
+                         local_damping=self.local_damping, pair_laws=self.pair_laws)
+        return bs, sim
+
+
+def _law(rd, tab, key, base=None):
+    rd.known(tab, LAW_KEYS | ({"materials"} if base is not None else set()), key)
+    b = base or ContactLaw(kn=None)
+    kn = rd.number(tab, "kn", f"{key}.kn", default=b.kn, positive=True) if (base is not None or "kn" in tab) \
+        else rd.number(tab, "kn", f"{key}.kn", positive=True)
+    ks_default = b.ks if base is not None and b.ks is not None else kn / 2
+    return ContactLaw(
+        kn=kn,
+        ks=rd.number(tab, "ks", f"{key}.ks", default=ks_default, positive=True),
+        friction_deg=rd.number(tab, "friction", f"{key}.friction", default=b.friction_deg, lo=0.0, hi=89.9),
+        cohesion=rd.number(tab, "cohesion", f"{key}.cohesion", default=b.cohesion, nonneg=True),
+        tensile=rd.number(tab, "tensile", f"{key}.tensile", default=b.tensile, nonneg=True),
+        damping=rd.number(tab, "damping", f"{key}.damping", default=b.damping, nonneg=True, hi=1.0),
+    )
+
+
+def load_scene(path) -> DDAScene:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(path, "(file)", str(path), f"cannot read scene file ({exc.__class__.__name__})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "(toml)", str(exc).split("\n")[0], "not valid TOML") from None
+    return scene_from_dict(data, path, text)
+
+
+def _list_of_tables(rd, data, name):
+    v = data.get(name, [])
+    if not isinstance(v, list) or any(not isinstance(t, dict) for t in v):
+        rd.err(name, v, f"must be an array of tables ([[{name}]])")
+    return v
+
+
+def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
+    path = Path(path)
+    rd = _Reader(path)
+    rd.known(data, TOP_KEYS, "")
+    name = rd.string(data, "name", "name", path.stem)
+
+    st = rd.table(data, "simulation", "simulation", required=True)
+    rd.known(st, {"duration", "dt", "safety", "gravity", "local_damping", "record_every", "frames"}, "simulation")
+    duration = rd.number(st, "duration", "simulation.duration", positive=True)
+    dt = rd.number(st, "dt", "simulation.dt", default=0.0, nonneg=True) or None
+    safety = rd.number(st, "safety", "simulation.safety", default=0.5, positive=True, hi=1.0)
+    gravity = rd.vector(st, "gravity", "simulation.gravity", default=(0.0, 0.0, -9.81))
+    local_damping = rd.number(st, "local_damping", "simulation.local_damping", default=0.0, nonneg=True, hi=0.99)
+    record_every = rd.number(st, "record_every", "simulation.record_every", default=duration / 100, positive=True)
+    if record_every > duration:
+        rd.err("simulation.record_every", record_every, f"must not exceed simulation.duration = {duration:g}")
+    frames = int(rd.number(st, "frames", "simulation.frames", default=20, lo=1, hi=100000))
+
+    ct = rd.table(data, "contact", "contact", required=True)
+    law = _law(rd, ct, "contact")
+
+    materials = {}
+    for k, mt in enumerate(_list_of_tables(rd, data, "material")):
+        key = f"material[{k}]"
+        rd.known(mt, {"name", "density", "E", "nu"}, key)
+        mname = rd.string(mt, "name", f"{key}.name", "")
+        if not mname:
+            rd.err(f"{key}.name", mname, "missing material name")
+        if mname in materials:
+            rd.err(f"{key}.name", mname, "material defined twice")
+        materials[mname] = Material(mname, rd.number(mt, "density", f"{key}.density", default=2600.0, positive=True),
+                                    rd.number(mt, "E", f"{key}.E", default=1e10, positive=True),
+                                    rd.number(mt, "nu", f"{key}.nu", default=0.25, lo=0.0, hi=0.4999))
+    pair_laws = {}
+    for k, pt in enumerate(_list_of_tables(rd, data, "contact_pair")):
+        key = f"contact_pair[{k}]"
+        mats = pt.get("materials")
+        if not (isinstance(mats, list) and len(mats) == 2 and all(isinstance(m, str) for m in mats)):
+            rd.err(f"{key}.materials", mats, 'must be two material names, e.g. ["rock", "joint"]')
+        pair_laws[tuple(mats)] = _law(rd, pt, key, base=law)
+
+    blocks, sources = [], []
+    for k, bt in enumerate(_list_of_tables(rd, data, "block")):
+        blocks.append(_read_block(rd, bt, f"block[{k}]", path))
+        sources.append(f"block[{k}]")
+    for k, gt in enumerate(_list_of_tables(rd, data, "generate")):
+        key = f"generate[{k}]"
+        from .generate import GENERATORS
+
+        kind = gt.get("kind")
+        if kind not in GENERATORS:
+            rd.err(f"{key}.kind", kind, f"must be one of {', '.join(sorted(GENERATORS))}")
+        params = {p: v for p, v in gt.items() if p != "kind"}
+        try:
+            made = GENERATORS[kind](**params)
+        except TypeError as exc:
+            rd.err(key, sorted(params), f"bad parameters for {kind!r} ({exc})")
+        except (ValueError, ArithmeticError) as exc:
+            rd.err(key, sorted(params), str(exc).split("\n")[0])
+        blocks.extend(made)
+        sources.extend([key] * len(made))
+    if not blocks:
+        rd.err("block", None, "the scene has no blocks (give [[block]] or [[generate]] tables)")
+    from .polyhedra import PolyhedronError, check_convex, half_edges
+
+    for spec, src in zip(blocks, sources):
+        try:
+            half_edges(len(spec.vertices), spec.faces)
+            check_convex(spec.vertices, spec.faces)
+        except PolyhedronError as exc:
+            rd.err(src, spec.name or "(block)", str(exc))
+        if spec.material not in materials and spec.material != "rock":
+            rd.err(f"{src}.material", spec.material, f"no [[material]] named so (have: {', '.join(materials) or 'none'})")
+        if int(getattr(spec, "dof", 6)) != 6:
+            rd.err(f"{src}.dof", spec.dof, "only rigid blocks (dof = 6) are implemented")
+    for (m1, m2) in pair_laws:
+        for m in (m1, m2):
+            if m not in materials and m != "rock":
+                rd.err("contact_pair", m, "unknown material")
+    if all(getattr(b, "fixed", False) for b in blocks):
+        rd.err("block", len(blocks), "every block is fixed: nothing would move")
+
+    ot = rd.table(data, "output", "output")
+    rd.known(ot, {"formats"}, "output")
+    formats = ot.get("formats", list(OUTPUT_FORMATS))
+    if not isinstance(formats, list) or any(f not in OUTPUT_FORMATS for f in formats):
+        rd.err("output.formats", formats, f"must be a list drawn from {', '.join(OUTPUT_FORMATS)}")
+    rt = rd.table(data, "render", "render")
+    rd.known(rt, {"width", "height"}, "render")
+    return DDAScene(
+        path=path, text=text, name=name, blocks=blocks, materials=materials, law=law, pair_laws=pair_laws,
+        duration=duration, dt=dt, safety=safety, gravity=gravity, local_damping=local_damping,
+        record_every=record_every, frames=frames, formats=tuple(formats),
+        width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
+        height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources)
+
+
+BLOCK_KEYS = {"name", "fixed", "material", "velocity", "angular_velocity", "shape", "size", "center", "rotation_axis",
+              "rotation_angle", "width", "height", "sides", "vertices", "faces", "file"}
+
+
+def _read_block(rd, bt, key, scene_path):
+    from .blockspec import BlockSpec
+
+    rd.known(bt, BLOCK_KEYS, key)
+    fields = dict(
+        name=rd.string(bt, "name", f"{key}.name", key),
+        fixed=rd.boolean(bt, "fixed", f"{key}.fixed", False),
+        material=rd.string(bt, "material", f"{key}.material", "rock"),
+        velocity=tuple(rd.vector(bt, "velocity", f"{key}.velocity", default=(0.0, 0.0, 0.0))),
+        angular_velocity=tuple(rd.vector(bt, "angular_velocity", f"{key}.angular_velocity", default=(0.0, 0.0, 0.0))),
+    )
+    forms = [f for f in ("shape", "vertices", "file") if f in bt]
+    if len(forms) != 1:
+        rd.err(key, sorted(bt), "give exactly one of: shape (+ size), vertices + faces, file")
+    form = forms[0]
+    if form == "shape":
+        from .shapes import SHAPES, GeometryError, rotation_about, shape
+
+        sname = rd.choice(bt, "shape", f"{key}.shape", SHAPES, None)
+        size = rd.number(bt, "size", f"{key}.size", positive=True)
+        centre = rd.vector(bt, "center", f"{key}.center", default=(0.0, 0.0, 0.0))
+        kw = {}
+        for extra in ("width", "height"):
+            if extra in bt:
+                kw[extra] = rd.number(bt, extra, f"{key}.{extra}", positive=True)
+        if "sides" in bt:
+            kw["sides"] = int(rd.number(bt, "sides", f"{key}.sides", lo=3, hi=64))
+        rotation = None
+        if "rotation_angle" in bt:
+            axis = rd.vector(bt, "rotation_axis", f"{key}.rotation_axis", default=(0.0, 0.0, 1.0))
+            if not np.linalg.norm(axis) > 0:
+                rd.err(f"{key}.rotation_axis", axis.tolist(), "must not be the zero vector")
+            rotation = rotation_about(axis, rd.number(bt, "rotation_angle", f"{key}.rotation_angle"))
+        try:
+            spec = shape(sname, size, center=centre, rotation=rotation, **kw)
+        except (GeometryError, TypeError, ValueError) as exc:
+            rd.err(f"{key}.shape", sname, str(exc).split("\n")[0])
+    elif form == "vertices":
+        if "faces" not in bt:
+            rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
+        verts = rd.matrix(bt, "vertices", f"{key}.vertices", 3)
+        faces = bt["faces"]
+        if not isinstance(faces, list) or not faces:
+            rd.err(f"{key}.faces", faces, "must be a non-empty list of vertex-index lists")
+        for i, f in enumerate(faces):
+            if not isinstance(f, list) or len(f) < 3 or any(isinstance(x, bool) or not isinstance(x, int) for x in f):
+                rd.err(f"{key}.faces[{i}]", f, "must be a list of >= 3 integer vertex indices")
+            if any(not 0 <= x < len(verts) for x in f):
+                rd.err(f"{key}.faces[{i}]", f, f"vertex index out of range 0..{len(verts) - 1}")
+        spec = BlockSpec(verts, faces)
+    else:
+        from .shapes import load_convex_mesh
+
+        fname = rd.string(bt, "file", f"{key}.file", "")
+        fpath = Path(fname)
+        if not fpath.is_absolute():
+            fpath = Path(scene_path).parent / fpath
+        try:
+            spec = load_convex_mesh(fpath)
+        except Exception as exc:  # meshio / geometry errors: one line for the user
+            rd.err(f"{key}.file", fname, str(exc).split("\n")[0] or exc.__class__.__name__)
+    for k, v in fields.items():
+        setattr(spec, k, v)
+    return spec
+
+
+__all__ = ["DDAScene", "Material", "SceneError", "load_scene", "scene_from_dict", "OUTPUT_FORMATS"]

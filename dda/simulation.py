@@ -1,0 +1,327 @@
+"""Explicit 3D DDA simulation: contact law, time step, the run loop in numba chunks, energy balance.
+
+Usage::
+
+    from dda.system import BlockSystem
+    from dda.simulation import Simulation, ContactLaw
+    bs = BlockSystem(); i = bs.add_block(spec, density=2600.0)
+    law = ContactLaw(kn=1e9, ks=5e8, friction_deg=30.0)
+    sim = Simulation(bs, law, gravity=(0, 0, -9.81), dt=None, safety=0.5)
+    res = sim.run(duration=1.0, record_every=0.01)
+    sim.displacement(i), sim.velocity(i)
+
+Per material-pair contact properties: ``Simulation(bs, law, pair_laws={("rock", "joint"): ContactLaw(...)})``;
+the material names are the blocks' ``material`` fields, pairs are unordered, and ``law`` applies to every pair
+not listed.
+
+Contact law (per contact point; see dda/_contact.py): ``kn`` and ``ks`` [N/m] are the penalty springs of one
+contact point (a block resting on a face has four points, so its normal stiffness is 4 kn); ``cohesion`` and
+``tensile`` [Pa] act on the point's share of the contact polygon's area and only on contacts present at the
+start of the run (bonded until they first fail); ``damping`` is the ratio of critical viscous damping of the
+normal spring (0 for elastic impacts). ``local_damping`` (Cundall's non-viscous damping, a fraction of the
+out-of-balance force opposing each velocity component) is for quasi-static runs only.
+
+Time step: ``dt=None`` takes ``safety * 2 / omega_max`` with omega_max from the stiffest contact (NPOINT
+points of the largest kn in parallel: a block held between two faces) on the smallest moving mass, and for rotation from the same springs at
+the largest vertex radius on the smallest principal moment of inertia.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _integrate as _it
+from ._broad import LARGE, build_grid, buckets_for, map_cells, n_cells
+from ._fcp import MAXP
+from .results import Results
+
+NPOINT = 8  # contact points assumed in parallel on one block (a block held between two faces) for the critical step
+
+
+@dataclass
+class ContactLaw:
+    kn: float = 1e9
+    ks: float | None = None  # default kn / 2
+    friction_deg: float = 30.0
+    cohesion: float = 0.0
+    tensile: float = 0.0
+    damping: float = 0.0
+
+    def row(self):
+        ks = self.kn / 2 if self.ks is None else self.ks
+        if not (self.kn > 0 and ks > 0):
+            raise ValueError(f"contact stiffness must be > 0 (kn = {self.kn!r}, ks = {ks!r})")
+        if not 0 <= self.friction_deg < 90:
+            raise ValueError(f"friction angle must be in [0, 90) degrees (got {self.friction_deg!r})")
+        if self.cohesion < 0 or self.tensile < 0 or self.damping < 0:
+            raise ValueError("cohesion, tensile strength and damping must be >= 0")
+        return [self.kn, ks, math.tan(math.radians(self.friction_deg)), self.cohesion, self.tensile, self.damping]
+
+
+class BlowUpError(RuntimeError):
+    """The run became unstable (non-finite state or an energy jump); `.results` holds the last good state."""
+
+    def __init__(self, message, results=None):
+        super().__init__(message)
+        self.results = results
+
+
+class Simulation:
+    def __init__(self, system, law: ContactLaw | None = None, gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5,
+                 local_damping=0.0, pair_laws=None, cell_factor=1.5, blowup_ratio=0.5):
+        self.system = system
+        self.law = law or ContactLaw()
+        self.gravity = np.asarray(gravity, float)
+        self.local_damping = float(local_damping)
+        self.safety = float(safety)
+        self.blowup_ratio = float(blowup_ratio)
+        A = system.arrays()
+        self.A = A
+        nb = A.n
+        if nb == 0:
+            raise ValueError("the block system is empty")
+        mats = system.materials
+        nm = len(mats)
+        tab = np.empty((nm, nm, 6))
+        tab[:, :] = self.law.row()
+        for (m1, m2), lw in (pair_laws or {}).items():
+            if m1 not in mats or m2 not in mats:
+                continue
+            a, b = mats.index(m1), mats.index(m2)
+            tab[a, b] = tab[b, a] = lw.row()
+        self.lawtab = tab
+        # state (copies: the BlockSystem stays the initial state)
+        self.pos = A.pos.copy()
+        self.pos0 = A.pos.copy()
+        self.quat = A.quat.copy()
+        self.vel = A.vel.copy()
+        self.angmom = A.angmom.copy()
+        self.active = np.nonzero(~A.fixed)[0].astype(np.int64)
+        self.vert = np.zeros_like(A.vloc)
+        self.fnw = np.zeros_like(A.nloc)
+        self.fdw = np.zeros_like(A.dloc)
+        self.aabb = np.zeros((nb, 6))
+        for i in range(nb):
+            _it.update_geometry(i, self.pos, self.quat, A.vert_start, A.face_start, A.vloc, A.nloc, A.dloc,
+                                self.vert, self.fnw, self.fdw, self.aabb)
+        ext = self.aabb[:, 3:] - self.aabb[:, :3]
+        self.size_b = ext.max(1)
+        self.d50 = float(np.median(self.size_b))
+        self.S = cell_factor * self.d50
+        self.margin = 0.05 * self.S
+        kn_max = float(tab[:, :, 0].max())
+        area = self.d50 ** 2
+        self.keep_gap = float(np.max(tab[:, :, 4]) * area / kn_max) if np.any(tab[:, :, 4] > 0) else 0.0
+        self.gap = 0.02 * self.d50 + self.keep_gap
+        # grids
+        self.cellbox = np.zeros((nb, 6), np.int64)
+        self.large = np.zeros(nb, bool)
+        for i in range(nb):
+            map_cells(self.aabb, i, self.S, self.margin, self.cellbox)
+            self.large[i] = n_cells(self.cellbox, i) > LARGE
+        fixed_idx = np.nonzero(A.fixed)[0].astype(np.int64)
+        nent = int(sum(n_cells(self.cellbox, i) for i in fixed_idx if not self.large[i]))
+        self.fstart, self.fentries = build_grid(fixed_idx, self.cellbox, self.large, buckets_for(nent))
+        nent = int(sum(n_cells(self.cellbox, i) for i in self.active if not self.large[i]))
+        self.mstart, self.mentries = build_grid(self.active, self.cellbox, self.large, buckets_for(nent))
+        self.large_list = np.nonzero(self.large)[0].astype(np.int64)
+        self.stamp = np.full(nb, -1, np.int64)
+        self.tag = np.zeros(1, np.int64)
+        self.pa = np.zeros(1024, np.int64)
+        self.pb = np.zeros(1024, np.int64)
+        self._alloc_contacts(max(256, 4 * nb))
+        self.force = np.zeros((nb, 3))
+        self.torque = np.zeros((nb, 3))
+        self.energy = np.zeros(6)
+        self.stats = np.zeros(10)
+        self.first_step = True
+        # time step
+        self.dt_crit = self.critical_dt()
+        self.dt = float(dt) if dt is not None else self.safety * self.dt_crit
+        if not self.dt > 0:
+            raise ValueError(f"time step must be > 0 (got {dt!r})")
+        # dt(0) = 0: the first step is a half step, v(1/2) = v(0) + dt/2 a(0), so the given initial
+        # velocities are those at t = 0 (free fall then follows x = x0 + v0 t + g t^2 / 2 exactly)
+        self.dt_prev = 0.0
+        self.time = 0.0
+        self.steps = 0
+        self.E0 = None
+        self.fcp_iterations = 0
+        # energies below the moving weight over a thousandth of the median block size never count as a blow-up
+        g = float(np.linalg.norm(self.gravity))
+        self.energy_floor = max(1e-3 * self.d50 * g * float(A.mass[self.active].sum()), 1e-300)
+        self.pair_tests = 0
+
+    # ------------------------------------------------------------------
+    def critical_dt(self):
+        """2 / omega_max for the stiffest contact on the lightest moving block (translation and rotation)."""
+        A = self.A
+        if len(self.active) == 0:
+            return 1.0
+        k = NPOINT * float(self.lawtab[:, :, 0].max())
+        m = A.mass[self.active]
+        imin = A.inertia[self.active].min(1)
+        r = A.radius[self.active]
+        zeta = float(self.lawtab[:, :, 5].max())
+        # viscous damping shortens the stable step: dt < 2 / w (sqrt(1 + z^2) - z). The point dampers are
+        # sized on the translational mass, so a rotational mode sees the ratio z sqrt(m r^2 / I).
+        zr = zeta * np.sqrt(m * r * r / imin)
+        dt_t = 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + zeta * zeta) - zeta)
+        dt_r = 2.0 / np.sqrt(k * r * r / imin) * (np.sqrt(1.0 + zr * zr) - zr)
+        return float(min(dt_t.min(), dt_r.min()))
+
+    def _alloc_contacts(self, cap):
+        self.cur = np.zeros(1, np.int64)
+        self.c_n_pair = np.zeros(2, np.int64)
+        self.c_key = np.full((2, cap), -1, np.int64)
+        self.c_a = np.zeros((2, cap), np.int64)
+        self.c_b = np.zeros((2, cap), np.int64)
+        self.c_nrm = np.zeros((2, cap, 3))
+        self.c_np = np.zeros((2, cap), np.int64)
+        self.c_pid = np.zeros((2, cap, MAXP), np.int64)
+        self.c_us = np.zeros((2, cap, MAXP, 3))
+        self.c_state = np.zeros((2, cap, MAXP), np.int8)
+        self.c_bond = np.zeros((2, cap, MAXP), np.bool_)
+        self.c_pos = np.zeros((2, cap, MAXP, 3))
+        self.c_fn = np.zeros((2, cap, MAXP))
+        self.c_depth = np.zeros((2, cap, MAXP))
+        hs = 16
+        while hs < 2 * cap + 16:
+            hs *= 2
+        self.htab = np.full(hs, -1, np.int64)
+
+    def _grow_contacts(self, need):
+        old = {k: getattr(self, k) for k in ("cur", "c_n_pair", "c_key", "c_a", "c_b", "c_nrm", "c_np", "c_pid",
+                                              "c_us", "c_state", "c_bond", "c_pos", "c_fn", "c_depth")}
+        cap = old["c_key"].shape[1]
+        self._alloc_contacts(max(2 * cap, int(need * 1.5)))
+        self.cur[:] = old["cur"]
+        self.c_n_pair[:] = old["c_n_pair"]
+        for k, v in old.items():
+            if k in ("cur", "c_n_pair"):
+                continue
+            getattr(self, k)[:, :cap] = v
+
+    def _chunk(self, nsteps):
+        A = self.A
+        while True:
+            status, done, self.mstart, self.mentries, self.pa, self.pb, self.large_list = _it.run_chunk(
+                nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.first_step,
+                self.pos, self.vel, self.quat, self.angmom, A.mass, A.inertia, A.fixed, A.material, self.active,
+                A.vert_start, A.face_start, A.edge_start, A.vloc, A.nloc, A.dloc, self.vert, self.fnw, self.fdw,
+                self.aabb, self.size_b, A.he_origin, A.he_next, A.he_pair, A.he_face, A.vert_he, A.edge_he,
+                self.S, self.cellbox, self.large, self.mstart, self.mentries, self.fstart, self.fentries,
+                self.large_list, self.stamp, self.tag, self.gap, self.margin, self.lawtab, self.keep_gap,
+                self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np, self.c_pid,
+                self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth, self.htab,
+                self.pa, self.pb, self.force, self.torque, self.energy, self.stats)
+            if done:
+                self.first_step = False
+                self.dt_prev = self.dt
+            self.steps += done
+            self.time += done * self.dt
+            self.fcp_iterations += int(self.stats[3])
+            nsteps -= done
+            if status == _it.NEED_CAPACITY:
+                self._grow_contacts(int(self.stats[2]))
+                continue
+            return status
+
+    def _snapshot(self):
+        return (self.pos.copy(), self.quat.copy(), self.vel.copy(), self.angmom.copy(), self.time, self.steps)
+
+    def _restore(self, snap):
+        self.pos[:], self.quat[:], self.vel[:], self.angmom[:] = snap[0], snap[1], snap[2], snap[3]
+        self.time, self.steps = snap[4], snap[5]
+
+    def run(self, duration, record_every=None, progress=None, chunk_seconds=1.0) -> Results:
+        """Advance by `duration` seconds; record every `record_every` seconds (default duration / 100).
+
+        `progress(msg)` receives a line after each chunk (at most about one per `chunk_seconds` of wall time).
+        Raises BlowUpError (with the results up to the last good state) when the run becomes unstable."""
+        nsteps = max(1, int(round(duration / self.dt)))
+        rec_steps = max(1, int(round((record_every or duration / 100) / self.dt)))
+        res = Results.empty(self)
+        res.record(self)  # state before the first step (its energy is known after the first step)
+        left = nsteps
+        t_wall = time.perf_counter()
+        last_say = t_wall
+        scale = 0.0
+        first = self.E0 is None
+        while left > 0:
+            n = 1 if first else min(rec_steps - (self.steps % rec_steps), left)
+            snap = self._snapshot()
+            status = self._chunk(n)
+            left -= n
+            e = self.energy
+            total = e[0] + e[1] + e[2] + e[3] + e[4] + e[5]
+            if first:
+                # energies of step 0 (kinetic in the product form over the first step)
+                self.E0 = total
+                self.PE0 = e[1]
+                res.energy[0] = np.r_[e, 0.0]
+            err = total - self.E0
+            ref = max(scale, abs(e[1] - self.PE0) + e[3] + e[4] + e[5], self.energy_floor)
+            bad = status == _it.BLOWUP or not np.all(np.isfinite(e))
+            if not bad and err > self.blowup_ratio * ref and err > 1e-9 * (abs(self.E0) + 1.0) and self.steps > n:
+                bad = True
+            if bad:
+                self._restore(snap)
+                why = "non-finite state" if status == _it.BLOWUP or not np.all(np.isfinite(e)) else \
+                    f"energy jump (balance error {err:.3g} J against {ref:.3g} J in play)"
+                raise BlowUpError(
+                    f"blow-up near t = {snap[4]:.6g} s (step {snap[5]}): {why}; dt = {self.dt:.3g} s "
+                    f"(critical {self.dt_crit:.3g} s): reduce dt or the safety factor, or soften kn", res)
+            scale = max(scale, e[0] + e[2] + abs(e[1] - self.PE0) + e[3] + e[4] + e[5])
+            if first:
+                first = False
+                if left > 0 and self.steps % rec_steps:
+                    continue
+            res.record(self)
+            now = time.perf_counter()
+            if progress and (now - last_say >= chunk_seconds or left == 0):
+                last_say = now
+                done = nsteps - left
+                progress(f"t = {self.time:.4g} s  step {self.steps}  ({100.0 * done / nsteps:5.1f} %)  "
+                         f"contacts {int(self.stats[5])}  points {int(self.stats[6])}  "
+                         f"KE {e[0]:.4g} J  balance error {err:.3g} J  {done / max(now - t_wall, 1e-9):.0f} steps/s")
+        res.wall_s = time.perf_counter() - t_wall
+        return res
+
+    # ------------------------------------------------------------------
+    def displacement(self, i):
+        return self.pos[i] - self.pos0[i]
+
+    def velocity(self, i):
+        return self.vel[i].copy()
+
+    def rotation(self, i):
+        from .system import quat_to_matrix
+
+        return quat_to_matrix(self.quat[i])
+
+    def vertices(self, i):
+        """World vertices of block i in the current state."""
+        A = self.A
+        R = self.rotation(i)
+        return self.pos[i] + A.vloc[A.vert_start[i]:A.vert_start[i + 1]] @ R.T
+
+    def contacts(self):
+        """Current contact points: dict of arrays (a, b, position, normal, normal force, depth, state)."""
+        c = int(self.cur[0])
+        n = int(self.c_n_pair[c])
+        out = {k: [] for k in ("a", "b", "position", "normal", "fn", "depth", "state", "shear")}
+        for s in range(n):
+            for q in range(int(self.c_np[c, s])):
+                out["a"].append(self.c_a[c, s])
+                out["b"].append(self.c_b[c, s])
+                out["position"].append(self.c_pos[c, s, q])
+                out["normal"].append(self.c_nrm[c, s])
+                out["fn"].append(self.c_fn[c, s, q])
+                out["depth"].append(self.c_depth[c, s, q])
+                out["state"].append(self.c_state[c, s, q])
+                out["shear"].append(self.c_us[c, s, q])
+        return {k: np.array(v) for k, v in out.items()}

@@ -1,0 +1,240 @@
+"""BlockSystem: every block of a model as flat structure-of-arrays (numba-ready).
+
+Each block is stored in its principal body frame: local vertex coordinates relative to the centroid along the
+principal axes of inertia, so the body inertia tensor is diagonal. The world pose is the centroid ``pos`` and a
+unit quaternion ``quat`` (w, x, y, z) turning body coordinates into world coordinates.
+
+Per-block ranges ``vert_start``, ``face_start``, ``he_start``, ``edge_start`` (length n_blocks + 1) index the
+concatenated vertex, face, half-edge and edge arrays; half-edge links (next / prev / pair / face / origin) and
+``vert_he`` / ``face_he`` hold global indices. ``edge_he`` lists one half-edge per undirected edge.
+
+Blocks carry ``dof`` (6 rigid; 12 reserved for deformable DDA blocks): per-block arrays are indexed by block
+and the integrator dispatches on it, so deformable blocks and spheres can be added as further body kinds
+without changing the layout of the rigid ones.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .polyhedra import PolyhedronError, check_convex, face_planes, half_edges, mass_properties
+
+
+def quat_from_matrix(R):
+    """Unit quaternion (w, x, y, z) of a proper rotation matrix."""
+    R = np.asarray(R, float)
+    t = np.trace(R)
+    if t > 0:
+        s = np.sqrt(t + 1.0) * 2
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    return q / np.linalg.norm(q)
+
+
+def quat_to_matrix(q):
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+@dataclass
+class _Block:
+    name: str
+    vloc: np.ndarray
+    faces: list
+    he: object
+    nloc: np.ndarray
+    dloc: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
+    mass: float
+    inertia: np.ndarray  # principal moments (3,)
+    volume: float
+    fixed: bool
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    material: str
+    density: float
+    E: float
+    nu: float
+    dof: int
+
+
+class BlockSystem:
+    """Collects blocks (``add_block``) and exposes them as flat arrays (``arrays()``)."""
+
+    def __init__(self):
+        self._blocks: list[_Block] = []
+        self._arrays = None
+        self.materials: list[str] = []
+
+    def __len__(self):
+        return len(self._blocks)
+
+    @property
+    def n_blocks(self):
+        return len(self._blocks)
+
+    def add_block(self, spec, density=2600.0, E=1e10, nu=0.25, fixed=None, material=None) -> int:
+        """Add a convex block from a BlockSpec (or anything with .vertices / .faces); return its index.
+
+        Raises PolyhedronError when the faces are not a closed, outward-oriented convex polyhedron.
+        """
+        v = np.asarray(spec.vertices, float).reshape(-1, 3)
+        faces = [list(map(int, f)) for f in spec.faces]
+        he = half_edges(len(v), faces)
+        check_convex(v, faces)
+        mp = mass_properties(v, faces)
+        if not density > 0:
+            raise ValueError(f"density must be > 0 (got {density!r})")
+        dof = int(getattr(spec, "dof", 6))
+        if dof != 6:
+            raise NotImplementedError("only rigid blocks (dof = 6) are implemented")
+        moments, axes = np.linalg.eigh(mp.inertia)
+        if np.linalg.det(axes) < 0:
+            axes[:, 2] *= -1
+        vloc = (v - mp.centroid) @ axes  # body coordinates along the principal axes
+        nloc, dloc = face_planes(vloc, faces)
+        name = getattr(spec, "name", "") or f"block{len(self._blocks)}"
+        mat = material if material is not None else getattr(spec, "material", "rock")
+        if mat not in self.materials:
+            self.materials.append(mat)
+        blk = _Block(
+            name=name, vloc=vloc, faces=faces, he=he, nloc=nloc, dloc=dloc, pos=mp.centroid.copy(),
+            quat=quat_from_matrix(axes), mass=density * mp.volume, inertia=density * moments, volume=mp.volume,
+            fixed=bool(getattr(spec, "fixed", False) if fixed is None else fixed),
+            velocity=np.asarray(getattr(spec, "velocity", (0.0, 0.0, 0.0)), float),
+            angular_velocity=np.asarray(getattr(spec, "angular_velocity", (0.0, 0.0, 0.0)), float),
+            material=mat, density=float(density), E=float(E), nu=float(nu), dof=dof,
+        )
+        self._blocks.append(blk)
+        self._arrays = None
+        return len(self._blocks) - 1
+
+    def add_blocks(self, specs, **kw) -> list[int]:
+        return [self.add_block(s, **kw) for s in specs]
+
+    def block(self, i) -> _Block:
+        return self._blocks[i]
+
+    def arrays(self) -> "SystemArrays":
+        if self._arrays is None:
+            self._arrays = SystemArrays.build(self._blocks, self.materials)
+        return self._arrays
+
+
+@dataclass
+class SystemArrays:
+    # per block
+    names: list
+    pos: np.ndarray
+    quat: np.ndarray
+    vel: np.ndarray
+    angmom: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray  # principal moments (n,3)
+    volume: np.ndarray
+    fixed: np.ndarray
+    material: np.ndarray
+    dof: np.ndarray
+    radius: np.ndarray  # largest vertex distance from the centroid
+    vert_start: np.ndarray
+    face_start: np.ndarray
+    he_start: np.ndarray
+    edge_start: np.ndarray
+    # per vertex / face / half-edge / edge
+    vloc: np.ndarray
+    nloc: np.ndarray
+    dloc: np.ndarray
+    he_origin: np.ndarray
+    he_next: np.ndarray
+    he_prev: np.ndarray
+    he_pair: np.ndarray
+    he_face: np.ndarray
+    vert_he: np.ndarray
+    face_he: np.ndarray
+    edge_he: np.ndarray
+    face_vert_start: np.ndarray  # face -> its vertex loop in face_verts (for output meshes)
+    face_verts: np.ndarray
+
+    @staticmethod
+    def build(blocks, materials):
+        n = len(blocks)
+        vs = np.zeros(n + 1, np.int64)
+        fs = np.zeros(n + 1, np.int64)
+        hs = np.zeros(n + 1, np.int64)
+        es = np.zeros(n + 1, np.int64)
+        for i, b in enumerate(blocks):
+            vs[i + 1] = vs[i] + len(b.vloc)
+            fs[i + 1] = fs[i] + len(b.faces)
+            hs[i + 1] = hs[i] + b.he.n_half_edges
+            es[i + 1] = es[i] + b.he.n_half_edges // 2
+
+        def cat(get, dtype, shape=()):
+            parts = [np.asarray(get(b), dtype).reshape((-1,) + shape) for b in blocks]
+            return np.ascontiguousarray(np.concatenate(parts)) if parts else np.zeros((0,) + shape, dtype)
+
+        he_origin = np.concatenate([b.he.he_origin + vs[i] for i, b in enumerate(blocks)]) if n else np.zeros(0, int)
+        he_next = np.concatenate([b.he.he_next + hs[i] for i, b in enumerate(blocks)]) if n else np.zeros(0, int)
+        he_prev = np.concatenate([b.he.he_prev + hs[i] for i, b in enumerate(blocks)]) if n else np.zeros(0, int)
+        he_pair = np.concatenate([b.he.he_pair + hs[i] for i, b in enumerate(blocks)]) if n else np.zeros(0, int)
+        he_face = np.concatenate([b.he.he_face + fs[i] for i, b in enumerate(blocks)]) if n else np.zeros(0, int)
+        vert_he = np.concatenate([b.he.vert_he + hs[i] for i, b in enumerate(blocks)]) if n else np.zeros(0, int)
+        face_he = np.concatenate([b.he.face_he + hs[i] for i, b in enumerate(blocks)]) if n else np.zeros(0, int)
+        edge_he = []
+        for i, b in enumerate(blocks):
+            loc = np.arange(b.he.n_half_edges)
+            edge_he.append(loc[loc < b.he.he_pair] + hs[i])
+        edge_he = np.concatenate(edge_he) if n else np.zeros(0, int)
+        fv_start = [0]
+        fv = []
+        for i, b in enumerate(blocks):
+            for f in b.faces:
+                fv.extend(int(x) + int(vs[i]) for x in f)
+                fv_start.append(len(fv))
+        radius = np.array([float(np.max(np.linalg.norm(b.vloc, axis=1))) for b in blocks])
+        angmom = np.zeros((n, 3))
+        for i, b in enumerate(blocks):
+            if not b.fixed:
+                R = quat_to_matrix(b.quat)
+                angmom[i] = R @ (b.inertia * (R.T @ b.angular_velocity))
+        vel = cat(lambda b: b.velocity, float, (3,))
+        for i, b in enumerate(blocks):
+            if b.fixed:
+                vel[i] = 0.0
+        return SystemArrays(
+            names=[b.name for b in blocks],
+            pos=cat(lambda b: b.pos, float, (3,)), quat=cat(lambda b: b.quat, float, (4,)), vel=vel,
+            angmom=angmom, mass=np.array([b.mass for b in blocks], float),
+            inertia=cat(lambda b: b.inertia, float, (3,)), volume=np.array([b.volume for b in blocks], float),
+            fixed=np.array([b.fixed for b in blocks], bool),
+            material=np.array([materials.index(b.material) for b in blocks], np.int64),
+            dof=np.array([b.dof for b in blocks], np.int64), radius=radius,
+            vert_start=vs, face_start=fs, he_start=hs, edge_start=es,
+            vloc=cat(lambda b: b.vloc, float, (3,)), nloc=cat(lambda b: b.nloc, float, (3,)),
+            dloc=cat(lambda b: b.dloc, float),
+            he_origin=he_origin.astype(np.int64), he_next=he_next.astype(np.int64), he_prev=he_prev.astype(np.int64),
+            he_pair=he_pair.astype(np.int64), he_face=he_face.astype(np.int64), vert_he=vert_he.astype(np.int64),
+            face_he=face_he.astype(np.int64), edge_he=edge_he.astype(np.int64),
+            face_vert_start=np.array(fv_start, np.int64), face_verts=np.array(fv, np.int64),
+        )
+
+    @property
+    def n(self):
+        return len(self.mass)
+
+
+__all__ = ["BlockSystem", "SystemArrays", "PolyhedronError", "quat_from_matrix", "quat_to_matrix"]
