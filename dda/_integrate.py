@@ -125,8 +125,73 @@ def _released(c_np, c_us, old, slot, matched, ks):
 
 
 @njit(cache=True)
+def _omega(j, kin, static, wpres, quat, inertia, angmom, R, out):
+    """World angular velocity of body j (prescribed, zero when fixed or asleep, else R I^-1 R^T L)."""
+    if kin[j]:
+        for a in range(3):
+            out[a] = wpres[j, a]
+    elif static[j]:
+        for a in range(3):
+            out[a] = 0.0
+    else:
+        quat_matrix(quat[j], R)
+        _ang_vel(R, inertia[j], angmom[j], out)
+
+
+@njit(cache=True)
+def _load_potential(i, pos, quat, mass, gravity, bforce, pl_start, pl_r, pl_f):
+    """-(m g + F_body).x - sum F_p.(x + R r_p): potential of gravity and the constant loads of block i."""
+    pe = 0.0
+    for a in range(3):
+        pe -= (mass[i] * gravity[a] + bforce[i, a]) * pos[i, a]
+    if pl_start[i + 1] > pl_start[i]:
+        R = np.empty((3, 3))
+        quat_matrix(quat[i], R)
+        for p in range(pl_start[i], pl_start[i + 1]):
+            for a in range(3):
+                x = pos[i, a] + R[a, 0] * pl_r[p, 0] + R[a, 1] * pl_r[p, 1] + R[a, 2] * pl_r[p, 2]
+                pe -= pl_f[p, a] * x
+    return pe
+
+
+@njit(cache=True)
+def regrid(active, static, cellbox, large):
+    """Static grid (fixed and sleeping blocks), moving grid (awake blocks) and the list of large blocks."""
+    nb = static.shape[0]
+    ns = 0
+    nl = 0
+    for i in range(nb):
+        if static[i]:
+            ns += 1
+        if large[i]:
+            nl += 1
+    sidx = np.empty(ns, np.int64)
+    lidx = np.empty(nl, np.int64)
+    ns = 0
+    nl = 0
+    nent = 0
+    for i in range(nb):
+        if static[i]:
+            sidx[ns] = i
+            ns += 1
+            if not large[i]:
+                nent += n_cells(cellbox, i)
+        if large[i]:
+            lidx[nl] = i
+            nl += 1
+    fstart, fentries = build_grid(sidx, cellbox, large, buckets_for(nent))
+    nent = 0
+    for k in range(active.shape[0]):
+        if not large[active[k]]:
+            nent += n_cells(cellbox, active[k])
+    mstart, mentries = build_grid(active, cellbox, large, buckets_for(nent))
+    return mstart, mentries, fstart, fentries, lidx
+
+
+@njit(cache=True)
 def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
               pos, vel, quat, angmom, mass, inertia, fixed, material, active,
+              movable, kin, wpres, bforce, pl_start, pl_r, pl_f, asleep, calm, pe_sl, sleep_par, acc,
               vs, fs, es, vloc, nloc, dloc, vert, fnw, fdw, aabb, size_b,
               he_origin, he_next, he_pair, he_face, vert_he, edge_he,
               S, cellbox, large, mstart, mentries, fstart, fentries, large_list, stamp, tag, gap, margin,
@@ -136,8 +201,21 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
     """Advance `nsteps` steps. energy = [KE, PE, elastic, fric, damp, local] (last three cumulative).
 
     stats = [steps done, status, pairs needed, fcp iterations, max depth, contacts, points, sliding points,
-    candidate pairs].
-    Returns (status, steps_done, mstart, mentries, pa, pb)."""
+    candidate pairs, sat searches, awake blocks].
+
+    Loads and prescribed motion: ``kin[i]`` blocks move at their velocity ``vel[i]`` and world angular velocity
+    ``wpres[i]`` whatever the forces (their contact forces do work counted in ``acc[0]``); ``bforce[i]`` is a
+    constant force at the centroid; point loads of block i are rows ``pl_start[i]:pl_start[i+1]`` of ``pl_f``
+    (world force) at the body-frame offset ``pl_r`` from the centroid. Their potential -F.x enters ``energy[1]``
+    with gravity's, minus the cumulative work of the prescribed blocks ``acc[0]``.
+
+    Sleeping (``sleep_par = [on, velocity, acceleration, steps]``): a free block whose speed (centroid plus
+    angular speed times its size) and acceleration stay below the thresholds for ``steps`` steps falls asleep
+    when every block touching it is fixed, asleep or itself calm that long; a sleeping block is neither
+    integrated nor searched for contacts (its contacts with other resting blocks are carried over unchanged, so
+    shear history and elastic energy are kept); it wakes the step after a block that is not calm touches it.
+    ``acc[1]`` holds the potential energy of the sleeping blocks (``pe_sl`` per block).
+    Returns (status, steps_done, mstart, mentries, pa, pb, large_list, active, fstart, fentries)."""
     nbody = pos.shape[0]
     nhe = he_origin.shape[0]
     cap = c_key.shape[1]
@@ -168,6 +246,16 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
     status = OK
     done = 0
     fit = 0
+    sleep_on = sleep_par[0] > 0.0
+    v_thr = sleep_par[1]
+    a_thr = sleep_par[2]
+    n_calm = np.int64(sleep_par[3])
+    static = np.empty(nbody, np.bool_)
+    for i in range(nbody):
+        static[i] = fixed[i] or asleep[i]
+    veto = np.zeros(nbody, np.bool_)
+    wake_list = np.empty(nbody, np.int64)
+    w_j = np.empty(3)
     for step in range(nsteps):
         # 1. geometry of the moving blocks, re-mapping
         rebuild = False
@@ -197,12 +285,12 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
             if nl > 0:
                 cnt = 0
                 for e in range(large_list.shape[0]):
-                    if fixed[large_list[e]]:
+                    if static[large_list[e]]:
                         cnt += 1
                 nll = np.empty(cnt + nl, np.int64)
                 cnt = 0
                 for e in range(large_list.shape[0]):
-                    if fixed[large_list[e]]:
+                    if static[large_list[e]]:
                         nll[cnt] = large_list[e]
                         cnt += 1
                 for k in range(active.shape[0]):
@@ -211,16 +299,17 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                         cnt += 1
                 large_list = nll
         # 2. candidate pairs
-        pa, pb, npair = find_pairs(active, fixed, large, aabb, cellbox, gap, mstart, mentries, mmask,
+        pa, pb, npair = find_pairs(active, static, large, aabb, cellbox, gap, mstart, mentries, mmask,
                                    fstart, fentries, fmask, large_list, stamp, tag, pa, pb)
-        if npair > cap:
-            status = NEED_CAPACITY
-            stats[2] = npair
-            break
-        # hash of last step's pairs
         old = cur[0]
         new = 1 - old
         nold = c_n_pair[old]
+        need = npair + nold if sleep_on else npair  # resting pairs are carried over
+        if need > cap:
+            status = NEED_CAPACITY
+            stats[2] = need
+            break
+        # hash of last step's pairs
         hsize = 16
         while hsize < 2 * nold + 16:
             hsize *= 2
@@ -247,6 +336,7 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
         npoints = 0
         nslide = 0
         nnew = 0
+        nwake = 0
         # 3. narrow phase and contact law
         for p in range(npair):
             i = pa[p]
@@ -315,6 +405,12 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
             c_nrm[new, s, 2] = nrm[2]
             c_np[new, s] = 0
             matched[:] = False
+            if sleep_on and asleep[j] and not veto[j] and g < gap and (kin[i] or calm[i] < n_calm):
+                # a moving block comes within the search gap of a sleeping one: wake it before they touch
+                # (veto marks a sleeping block already on the wake list)
+                veto[j] = True
+                wake_list[nwake] = j
+                nwake += 1
             if g > kg:
                 d_fric += _released(c_np, c_us, old, slot, matched, ks)
                 continue
@@ -342,9 +438,12 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                 continue
             area = polygon_area(p_pos, k, nrm)
             apt = area / k
-            if fixed[i]:
+            inj = static[j] or kin[j]
+            if kin[i] and inj:
+                meff = min(mass[i], mass[j])
+            elif kin[i]:
                 meff = mass[j]
-            elif fixed[j]:
+            elif inj:
                 meff = mass[i]
             else:
                 meff = mass[i] * mass[j] / (mass[i] + mass[j])
@@ -384,9 +483,8 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                 # relative velocity of B with respect to A at the point (half-step velocities)
                 for a in range(3):
                     vrel[a] = vel[j, a] - vel[i, a]
-                if not fixed[j]:
-                    quat_matrix(quat[j], R)
-                    _ang_vel(R, inertia[j], angmom[j], w_old)
+                if not static[j]:
+                    _omega(j, kin, static, wpres, quat, inertia, angmom, R, w_old)
                     rx = p_pos[q, 0] - pos[j, 0]
                     ry = p_pos[q, 1] - pos[j, 1]
                     rz = p_pos[q, 2] - pos[j, 2]
@@ -394,8 +492,7 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                     vrel[1] += w_old[2] * rx - w_old[0] * rz
                     vrel[2] += w_old[0] * ry - w_old[1] * rx
                 if not fixed[i]:
-                    quat_matrix(quat[i], R)
-                    _ang_vel(R, inertia[i], angmom[i], w_old)
+                    _omega(i, kin, static, wpres, quat, inertia, angmom, R, w_old)
                     rx = p_pos[q, 0] - pos[i, 0]
                     ry = p_pos[q, 1] - pos[i, 1]
                     rz = p_pos[q, 2] - pos[i, 2]
@@ -415,7 +512,7 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                     maxdepth = p_depth[q]
                 for a in range(3):
                     force[i, a] -= fpt[a]
-                if not fixed[j]:
+                if not static[j]:
                     for a in range(3):
                         force[j, a] += fpt[a]
                     rx = p_pos[q, 0] - pos[j, 0]
@@ -445,6 +542,46 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
             c_np[new, s] = kept
             npoints += kept
             d_fric += _released(c_np, c_us, old, slot, matched, ks)
+            if sleep_on and kept > 0:
+                moving_i = kin[i] or calm[i] < n_calm
+                if not asleep[j]:
+                    if moving_i:
+                        veto[j] = True
+                    if not static[j] and (kin[j] or calm[j] < n_calm):
+                        veto[i] = True
+        if sleep_on:
+            # contacts between resting bodies are carried over unchanged (shear history and elastic energy kept)
+            for s0 in range(nold):
+                a0 = c_a[old, s0]
+                b0 = c_b[old, s0]
+                if c_np[old, s0] == 0 or not (static[a0] and static[b0]) or not (asleep[a0] or asleep[b0]):
+                    continue
+                s = nnew
+                nnew += 1
+                c_key[new, s] = c_key[old, s0]
+                c_a[new, s] = a0
+                c_b[new, s] = b0
+                c_np[new, s] = c_np[old, s0]
+                for a in range(3):
+                    c_nrm[new, s, a] = c_nrm[old, s0, a]
+                kn0 = lawtab[material[a0], material[b0], 0]
+                ks0 = lawtab[material[a0], material[b0], 1]
+                for q in range(c_np[old, s0]):
+                    c_pid[new, s, q] = c_pid[old, s0, q]
+                    c_state[new, s, q] = c_state[old, s0, q]
+                    c_bond[new, s, q] = c_bond[old, s0, q]
+                    c_fn[new, s, q] = c_fn[old, s0, q]
+                    d0 = c_depth[old, s0, q]
+                    c_depth[new, s, q] = d0
+                    u2 = 0.0
+                    for a in range(3):
+                        c_us[new, s, q, a] = c_us[old, s0, q, a]
+                        c_pos[new, s, q, a] = c_pos[old, s0, q, a]
+                        u2 += c_us[old, s0, q, a] ** 2
+                    e_el += 0.5 * kn0 * d0 * d0
+                    e_el += 0.5 * ks0 * u2
+                ncontact += 1
+                npoints += c_np[old, s0]
         c_n_pair[new] = nnew
         cur[0] = new
         first_step = False
@@ -456,12 +593,41 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
         blown = False
         for k in range(active.shape[0]):
             i = active[k]
+            if kin[i]:
+                # prescribed motion: the driver does the work the contacts do against it
+                acc[0] -= dt * (force[i, 0] * vel[i, 0] + force[i, 1] * vel[i, 1] + force[i, 2] * vel[i, 2]
+                                + torque[i, 0] * wpres[i, 0] + torque[i, 1] * wpres[i, 1] + torque[i, 2] * wpres[i, 2])
+                _turn(quat[i], wpres[i], dt, qh)
+                for a in range(4):
+                    quat[i, a] = qh[a]
+                for a in range(3):
+                    pos[i, a] += dt * vel[i, a]
+                continue
             m = mass[i]
             quat_matrix(quat[i], R)
+            # constant point loads (world force at a body point) and their potential
+            for p in range(pl_start[i], pl_start[i + 1]):
+                r0 = R[0, 0] * pl_r[p, 0] + R[0, 1] * pl_r[p, 1] + R[0, 2] * pl_r[p, 2]
+                r1 = R[1, 0] * pl_r[p, 0] + R[1, 1] * pl_r[p, 1] + R[1, 2] * pl_r[p, 2]
+                r2 = R[2, 0] * pl_r[p, 0] + R[2, 1] * pl_r[p, 1] + R[2, 2] * pl_r[p, 2]
+                f0 = pl_f[p, 0]
+                f1 = pl_f[p, 1]
+                f2 = pl_f[p, 2]
+                force[i, 0] += f0
+                force[i, 1] += f1
+                force[i, 2] += f2
+                torque[i, 0] += r1 * f2 - r2 * f1
+                torque[i, 1] += r2 * f0 - r0 * f2
+                torque[i, 2] += r0 * f1 - r1 * f0
+                pe -= f0 * (pos[i, 0] + r0) + f1 * (pos[i, 1] + r1) + f2 * (pos[i, 2] + r2)
             _ang_vel(R, inertia[i], angmom[i], w_old)
+            fsq = 0.0
+            tsq = 0.0
             for a in range(3):
-                f = force[i, a] + m * gravity[a]
+                f = force[i, a] + m * gravity[a] + bforce[i, a]
                 t = torque[i, a]
+                fsq += f * f
+                tsq += t * t
                 if local_damp > 0.0:
                     if vel[i, a] != 0.0:
                         fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
@@ -475,9 +641,19 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                 ke += 0.5 * m * vel[i, a] * vnew
                 vel[i, a] = vnew
                 Lnew[a] = angmom[i, a] + dtavg * t
-                pe -= m * gravity[a] * pos[i, a]
+                pe -= (m * gravity[a] + bforce[i, a]) * pos[i, a]
             _ang_vel(R, inertia[i], Lnew, w_new)
             ke += 0.5 * (angmom[i, 0] * w_new[0] + angmom[i, 1] * w_new[1] + angmom[i, 2] * w_new[2])
+            if sleep_on:
+                sz = size_b[i]
+                spd = np.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) \
+                    + sz * np.sqrt(w_new[0] ** 2 + w_new[1] ** 2 + w_new[2] ** 2)
+                imin = min(inertia[i, 0], min(inertia[i, 1], inertia[i, 2]))
+                acl = np.sqrt(fsq) / m + sz * np.sqrt(tsq) / imin
+                if spd < v_thr and acl < a_thr:
+                    calm[i] += 1
+                else:
+                    calm[i] = 0
             # mid-step orientation predictor, then the full turn
             _turn(quat[i], w_new, 0.5 * dt, qh)
             quat_matrix(qh, R)
@@ -490,6 +666,51 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                 pos[i, a] += dt * vel[i, a]
                 if not np.isfinite(pos[i, a]) or not np.isfinite(vel[i, a]) or not np.isfinite(Lnew[a]):
                     blown = True
+        if sleep_on:
+            changed = False
+            d_sleep = 0.0
+            for k in range(active.shape[0]):
+                i = active[k]
+                if not kin[i] and calm[i] >= n_calm and not veto[i]:
+                    # falls asleep: the kinetic energy left (below the thresholds) counts as damped
+                    quat_matrix(quat[i], R)
+                    _ang_vel(R, inertia[i], angmom[i], w_old)
+                    d_sleep += 0.5 * mass[i] * (vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) \
+                        + 0.5 * (angmom[i, 0] * w_old[0] + angmom[i, 1] * w_old[1] + angmom[i, 2] * w_old[2])
+                    for a in range(3):
+                        vel[i, a] = 0.0
+                        angmom[i, a] = 0.0
+                    asleep[i] = True
+                    static[i] = True
+                    pe_sl[i] = _load_potential(i, pos, quat, mass, gravity, bforce, pl_start, pl_r, pl_f)
+                    acc[1] += pe_sl[i]
+                    changed = True
+                veto[i] = False
+            for e in range(nwake):
+                j = wake_list[e]
+                veto[j] = False
+                if asleep[j]:
+                    asleep[j] = False
+                    static[j] = False
+                    calm[j] = 0
+                    acc[1] -= pe_sl[j]
+                    changed = True
+            d_damp += d_sleep
+            if changed:
+                na = 0
+                for k in range(movable.shape[0]):
+                    if not asleep[movable[k]]:
+                        na += 1
+                active = np.empty(na, np.int64)
+                na = 0
+                for k in range(movable.shape[0]):
+                    if not asleep[movable[k]]:
+                        active[na] = movable[k]
+                        na += 1
+                mstart, mentries, fstart, fentries, large_list = regrid(active, static, cellbox, large)
+                mmask = mstart.shape[0] - 2
+                fmask = fstart.shape[0] - 2
+        pe += acc[1] - acc[0]
         dt_prev = dt
         energy[0] = ke
         energy[1] = pe
@@ -504,10 +725,11 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
         stats[7] = nslide
         stats[8] = npair
         stats[9] = nsat
+        stats[10] = active.shape[0]
         if blown or not np.isfinite(e_el):
             status = BLOWUP
             break
     stats[0] = done
     stats[1] = status
     stats[3] = fit
-    return status, done, mstart, mentries, pa, pb, large_list
+    return status, done, mstart, mentries, pa, pb, large_list, active, fstart, fentries

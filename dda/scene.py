@@ -5,14 +5,20 @@ written. Keys::
 
     name = "incline"
     [simulation]   duration (s, required), dt (0 or absent: automatic), safety = 0.5, gravity = [0, 0, -9.81],
-                   local_damping = 0.0, record_every (default duration / 100), frames = 20 (VTU frames)
+                   local_damping = 0.0, record_every (default duration / 100), frames = 20 (VTU frames),
+                   sleep = false (resting blocks stop being integrated), sleep_velocity (m/s), sleep_accel
+                   (m/s2), sleep_steps = 200 (see dda/simulation.py for the defaults)
     [contact]      default law: kn (N/m per contact point, required), ks (default kn / 2), friction (deg),
                    cohesion (Pa), tensile (Pa), damping (ratio of critical)
     [[material]]   name, density (kg/m3) = 2600, E = 1e10, nu = 0.25
     [[contact_pair]]  materials = ["a", "b"] and any [contact] key: the law between those two materials
     [[block]]      one of: shape = "cube" + size (+ center, rotation_axis, rotation_angle, width, height, sides);
                    vertices + faces (0-based, counter-clockwise seen from outside); file = "mesh.stl" (convex);
-                   and name, fixed, material, velocity, angular_velocity
+                   and name, fixed, material, velocity, angular_velocity, prescribed = false (move at the
+                   given velocity / angular velocity whatever the forces), force = [fx, fy, fz] (constant
+                   body load at the centroid, N)
+    [[load]]       block = "name", force = [fx, fy, fz] (N, world), point = [x, y, z] (world, initial pose;
+                   absent: the centroid): a constant point load
     [[generate]]   kind = one of dda.generate.GENERATORS, the other keys are its parameters
     [output]       formats = ["npz", "csv", "vtu", "png"]
     [render]       width = 1600, height = 1100
@@ -31,7 +37,7 @@ from .simulation import ContactLaw
 
 OUTPUT_FORMATS = ("npz", "csv", "vtu", "png")
 TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact_pair", "block", "generate",
-            "output", "render"}
+            "output", "render", "load"}
 LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
 
 
@@ -63,6 +69,8 @@ class DDAScene:
     width: int = 1600
     height: int = 1100
     sources: list = field(default_factory=list)  # scene key that produced each block
+    loads: list = field(default_factory=list)  # (block index, world point or None, force)
+    sleep: dict = field(default_factory=dict)  # Simulation sleep keywords
 
     def build(self):
         """BlockSystem and Simulation of the scene."""
@@ -72,9 +80,17 @@ class DDAScene:
         bs = BlockSystem()
         for spec in self.blocks:
             m = self.materials.get(spec.material) or Material(spec.material)
-            bs.add_block(spec, density=m.density, E=m.E, nu=m.nu)
+            i = bs.add_block(spec, density=m.density, E=m.E, nu=m.nu)
+            f = getattr(spec, "body_force", None)
+            if f is not None and np.any(np.asarray(f) != 0):
+                bs.add_body_load(i, f)
+        for i, point, force in self.loads:
+            if point is None:
+                bs.add_body_load(i, force)
+            else:
+                bs.add_point_load(i, point, force)
         sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
-                         local_damping=self.local_damping, pair_laws=self.pair_laws)
+                         local_damping=self.local_damping, pair_laws=self.pair_laws, **self.sleep)
         return bs, sim
 
 
@@ -121,7 +137,14 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
     name = rd.string(data, "name", "name", path.stem)
 
     st = rd.table(data, "simulation", "simulation", required=True)
-    rd.known(st, {"duration", "dt", "safety", "gravity", "local_damping", "record_every", "frames"}, "simulation")
+    rd.known(st, {"duration", "dt", "safety", "gravity", "local_damping", "record_every", "frames", "sleep",
+                  "sleep_velocity", "sleep_accel", "sleep_steps"}, "simulation")
+    sleep = {"sleep": rd.boolean(st, "sleep", "simulation.sleep", False)}
+    for k in ("sleep_velocity", "sleep_accel"):
+        if k in st:
+            sleep[k] = rd.number(st, k, f"simulation.{k}", positive=True)
+    if "sleep_steps" in st:
+        sleep["sleep_steps"] = int(rd.number(st, "sleep_steps", "simulation.sleep_steps", lo=1, hi=1e9))
     duration = rd.number(st, "duration", "simulation.duration", positive=True)
     dt = rd.number(st, "dt", "simulation.dt", default=0.0, nonneg=True) or None
     safety = rd.number(st, "safety", "simulation.safety", default=0.5, positive=True, hi=1.0)
@@ -195,6 +218,22 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
                 rd.err("contact_pair", m, "unknown material")
     if all(getattr(b, "fixed", False) for b in blocks):
         rd.err("block", len(blocks), "every block is fixed: nothing would move")
+    for spec, src in zip(blocks, sources):
+        if getattr(spec, "prescribed", False) and spec.fixed:
+            rd.err(f"{src}.prescribed", True, "a block cannot be both fixed and prescribed")
+    names = {}
+    for k, spec in enumerate(blocks):
+        names.setdefault(spec.name, k)
+    loads = []
+    for k, lt in enumerate(_list_of_tables(rd, data, "load")):
+        key = f"load[{k}]"
+        rd.known(lt, {"block", "force", "point"}, key)
+        bname = rd.string(lt, "block", f"{key}.block", "")
+        if bname not in names:
+            rd.err(f"{key}.block", bname, "no block of that name")
+        force = rd.vector(lt, "force", f"{key}.force")
+        point = rd.vector(lt, "point", f"{key}.point") if "point" in lt else None
+        loads.append((names[bname], point, force))
 
     ot = rd.table(data, "output", "output")
     rd.known(ot, {"formats"}, "output")
@@ -208,10 +247,11 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         duration=duration, dt=dt, safety=safety, gravity=gravity, local_damping=local_damping,
         record_every=record_every, frames=frames, formats=tuple(formats),
         width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
-        height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources)
+        height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources,
+        loads=loads, sleep=sleep)
 
 
-BLOCK_KEYS = {"name", "fixed", "material", "velocity", "angular_velocity", "shape", "size", "center", "rotation_axis",
+BLOCK_KEYS = {"name", "fixed", "material", "velocity", "angular_velocity", "prescribed", "force", "shape", "size", "center", "rotation_axis",
               "rotation_angle", "width", "height", "sides", "vertices", "faces", "file"}
 
 
@@ -225,6 +265,8 @@ def _read_block(rd, bt, key, scene_path):
         material=rd.string(bt, "material", f"{key}.material", "rock"),
         velocity=tuple(rd.vector(bt, "velocity", f"{key}.velocity", default=(0.0, 0.0, 0.0))),
         angular_velocity=tuple(rd.vector(bt, "angular_velocity", f"{key}.angular_velocity", default=(0.0, 0.0, 0.0))),
+        prescribed=rd.boolean(bt, "prescribed", f"{key}.prescribed", False),
+        body_force=rd.vector(bt, "force", f"{key}.force", default=(0.0, 0.0, 0.0)),
     )
     forms = [f for f in ("shape", "vertices", "file") if f in bt]
     if len(forms) != 1:

@@ -21,6 +21,17 @@ start of the run (bonded until they first fail); ``damping`` is the ratio of cri
 normal spring (0 for elastic impacts). ``local_damping`` (Cundall's non-viscous damping, a fraction of the
 out-of-balance force opposing each velocity component) is for quasi-static runs only.
 
+Loads and prescribed motion (see dda/system.py): ``bs.add_body_load(i, force)``, ``bs.add_point_load(i, point,
+force)``, ``bs.add_block(spec, prescribed=True)``. Their energy: the constant loads' potential -F.x is part of
+the potential column, and so is minus the work the prescribed blocks do on the others (the driver's input).
+
+Sleeping (``sleep=True``): a free block whose speed (centroid speed plus angular speed times its size) stays
+below ``sleep_velocity`` and its acceleration below ``sleep_accel`` for ``sleep_steps`` steps, and whose
+contacts are all with fixed, sleeping or equally calm blocks, is no longer integrated nor searched for contacts
+(its resting contacts are kept as they are); it wakes when a moving block touches it. Defaults:
+sleep_velocity = 1e-4 sqrt(g d50), sleep_accel = 1e-3 g (d50 the median block size; g = 9.81 without
+gravity). ``sim.active`` lists the awake moving blocks, ``sim.asleep`` flags the sleeping ones.
+
 Time step: ``dt=None`` takes ``safety * 2 / omega_max`` with omega_max from the stiffest contact (NPOINT
 points of the largest kn in parallel: a block held between two faces) on the smallest moving mass, and for rotation from the same springs at
 the largest vertex radius on the smallest principal moment of inertia.
@@ -71,7 +82,8 @@ class BlowUpError(RuntimeError):
 
 class Simulation:
     def __init__(self, system, law: ContactLaw | None = None, gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5,
-                 local_damping=0.0, pair_laws=None, cell_factor=1.5, blowup_ratio=0.5):
+                 local_damping=0.0, pair_laws=None, cell_factor=1.5, blowup_ratio=0.5, sleep=False,
+                 sleep_velocity=None, sleep_accel=None, sleep_steps=200):
         self.system = system
         self.law = law or ContactLaw()
         self.gravity = np.asarray(gravity, float)
@@ -100,6 +112,12 @@ class Simulation:
         self.vel = A.vel.copy()
         self.angmom = A.angmom.copy()
         self.active = np.nonzero(~A.fixed)[0].astype(np.int64)
+        self.movable = self.active.copy()
+        self.free = np.nonzero(~A.fixed & ~A.kin)[0].astype(np.int64)
+        self.asleep = np.zeros(nb, bool)
+        self.calm = np.zeros(nb, np.int64)
+        self.pe_sl = np.zeros(nb)
+        self.acc = np.zeros(2)  # [work of the prescribed blocks, potential energy of the sleeping blocks]
         self.vert = np.zeros_like(A.vloc)
         self.fnw = np.zeros_like(A.nloc)
         self.fdw = np.zeros_like(A.dloc)
@@ -136,7 +154,13 @@ class Simulation:
         self.force = np.zeros((nb, 3))
         self.torque = np.zeros((nb, 3))
         self.energy = np.zeros(6)
-        self.stats = np.zeros(10)
+        self.stats = np.zeros(12)
+        g0 = float(np.linalg.norm(self.gravity)) or 9.81
+        v_s = 1e-4 * math.sqrt(g0 * self.d50) if sleep_velocity is None else float(sleep_velocity)
+        a_s = 1e-3 * g0 if sleep_accel is None else float(sleep_accel)
+        if sleep and not (v_s > 0 and a_s > 0 and sleep_steps >= 1):
+            raise ValueError("sleep thresholds must be > 0 and sleep_steps >= 1")
+        self.sleep_par = np.array([1.0 if sleep else 0.0, v_s, a_s, float(int(sleep_steps))])
         self.first_step = True
         # time step
         self.dt_crit = self.critical_dt()
@@ -159,12 +183,12 @@ class Simulation:
     def critical_dt(self):
         """2 / omega_max for the stiffest contact on the lightest moving block (translation and rotation)."""
         A = self.A
-        if len(self.active) == 0:
+        if len(self.free) == 0:
             return 1.0
         k = NPOINT * float(self.lawtab[:, :, 0].max())
-        m = A.mass[self.active]
-        imin = A.inertia[self.active].min(1)
-        r = A.radius[self.active]
+        m = A.mass[self.free]
+        imin = A.inertia[self.free].min(1)
+        r = A.radius[self.free]
         zeta = float(self.lawtab[:, :, 5].max())
         # viscous damping shortens the stable step: dt < 2 / w (sqrt(1 + z^2) - z). The point dampers are
         # sized on the translational mass, so a rotational mode sees the ratio z sqrt(m r^2 / I).
@@ -208,9 +232,12 @@ class Simulation:
     def _chunk(self, nsteps):
         A = self.A
         while True:
-            status, done, self.mstart, self.mentries, self.pa, self.pb, self.large_list = _it.run_chunk(
+            (status, done, self.mstart, self.mentries, self.pa, self.pb, self.large_list, self.active,
+             self.fstart, self.fentries) = _it.run_chunk(
                 nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.first_step,
                 self.pos, self.vel, self.quat, self.angmom, A.mass, A.inertia, A.fixed, A.material, self.active,
+                self.movable, A.kin, A.wpres, A.bforce, A.pl_start, A.pl_r, A.pl_f, self.asleep, self.calm,
+                self.pe_sl, self.sleep_par, self.acc,
                 A.vert_start, A.face_start, A.edge_start, A.vloc, A.nloc, A.dloc, self.vert, self.fnw, self.fdw,
                 self.aabb, self.size_b, A.he_origin, A.he_next, A.he_pair, A.he_face, A.vert_he, A.edge_he,
                 self.S, self.cellbox, self.large, self.mstart, self.mentries, self.fstart, self.fentries,
@@ -234,8 +261,13 @@ class Simulation:
         return (self.pos.copy(), self.quat.copy(), self.vel.copy(), self.angmom.copy(), self.time, self.steps)
 
     def _restore(self, snap):
+        # the state of the last good record (the sleep flags stay as they are: a blow-up ends the run)
         self.pos[:], self.quat[:], self.vel[:], self.angmom[:] = snap[0], snap[1], snap[2], snap[3]
         self.time, self.steps = snap[4], snap[5]
+
+    @property
+    def n_asleep(self):
+        return int(self.asleep.sum())
 
     def run(self, duration, record_every=None, progress=None, chunk_seconds=1.0) -> Results:
         """Advance by `duration` seconds; record every `record_every` seconds (default duration / 100).

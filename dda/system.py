@@ -8,6 +8,11 @@ Per-block ranges ``vert_start``, ``face_start``, ``he_start``, ``edge_start`` (l
 concatenated vertex, face, half-edge and edge arrays; half-edge links (next / prev / pair / face / origin) and
 ``vert_he`` / ``face_he`` hold global indices. ``edge_he`` lists one half-edge per undirected edge.
 
+Loads and prescribed motion: ``add_block(..., prescribed=True)`` (or a spec attribute ``prescribed``) makes a
+block move at its given velocity and angular velocity whatever the forces (a pushing plate); ``add_body_load``
+adds a constant world force at a block's centroid, ``add_point_load`` a constant world force at a point of the
+block (given in world coordinates of the initial pose, carried with the block).
+
 Blocks carry ``dof`` (6 rigid; 12 reserved for deformable DDA blocks): per-block arrays are indexed by block
 and the integrator dispatches on it, so deformable blocks and spheres can be added as further body kinds
 without changing the layout of the rigid ones.
@@ -71,6 +76,8 @@ class _Block:
     E: float
     nu: float
     dof: int
+    prescribed: bool = False
+    body_force: np.ndarray = None
 
 
 class BlockSystem:
@@ -80,6 +87,7 @@ class BlockSystem:
         self._blocks: list[_Block] = []
         self._arrays = None
         self.materials: list[str] = []
+        self._point_loads: list = []  # (block, body-frame offset, world force)
 
     def __len__(self):
         return len(self._blocks)
@@ -88,8 +96,11 @@ class BlockSystem:
     def n_blocks(self):
         return len(self._blocks)
 
-    def add_block(self, spec, density=2600.0, E=1e10, nu=0.25, fixed=None, material=None) -> int:
+    def add_block(self, spec, density=2600.0, E=1e10, nu=0.25, fixed=None, material=None, prescribed=None) -> int:
         """Add a convex block from a BlockSpec (or anything with .vertices / .faces); return its index.
+
+        ``prescribed=True`` (default: the spec's ``prescribed`` attribute, if any) moves the block at the spec's
+        velocity and angular velocity (world frame, about the centroid) for the whole run.
 
         Raises PolyhedronError when the faces are not a closed, outward-oriented convex polyhedron.
         """
@@ -119,10 +130,35 @@ class BlockSystem:
             velocity=np.asarray(getattr(spec, "velocity", (0.0, 0.0, 0.0)), float),
             angular_velocity=np.asarray(getattr(spec, "angular_velocity", (0.0, 0.0, 0.0)), float),
             material=mat, density=float(density), E=float(E), nu=float(nu), dof=dof,
+            prescribed=bool(getattr(spec, "prescribed", False) if prescribed is None else prescribed),
+            body_force=np.zeros(3),
         )
+        if blk.prescribed and blk.fixed:
+            raise ValueError(f"block {name!r} cannot be both fixed and prescribed")
         self._blocks.append(blk)
         self._arrays = None
         return len(self._blocks) - 1
+
+    def add_body_load(self, i, force):
+        """Add a constant world force [N] at the centroid of block i (adds up over calls)."""
+        f = np.asarray(force, float).reshape(3)
+        if not np.all(np.isfinite(f)):
+            raise ValueError(f"load force must be finite (got {force!r})")
+        self._blocks[i].body_force = self._blocks[i].body_force + f
+        self._arrays = None
+
+    def add_point_load(self, i, point, force):
+        """Add a constant world force [N] acting at `point` (world coordinates in the initial pose) of block i.
+
+        The point moves with the block; the force keeps its world direction and size."""
+        b = self._blocks[i]
+        f = np.asarray(force, float).reshape(3)
+        x = np.asarray(point, float).reshape(3)
+        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(x))):
+            raise ValueError("load point and force must be finite")
+        r = quat_to_matrix(b.quat).T @ (x - b.pos)
+        self._point_loads.append((int(i), r, f))
+        self._arrays = None
 
     def add_blocks(self, specs, **kw) -> list[int]:
         return [self.add_block(s, **kw) for s in specs]
@@ -132,7 +168,7 @@ class BlockSystem:
 
     def arrays(self) -> "SystemArrays":
         if self._arrays is None:
-            self._arrays = SystemArrays.build(self._blocks, self.materials)
+            self._arrays = SystemArrays.build(self._blocks, self.materials, self._point_loads)
         return self._arrays
 
 
@@ -169,9 +205,16 @@ class SystemArrays:
     edge_he: np.ndarray
     face_vert_start: np.ndarray  # face -> its vertex loop in face_verts (for output meshes)
     face_verts: np.ndarray
+    # loads and prescribed motion
+    kin: np.ndarray = None  # (n,) bool: prescribed velocity
+    wpres: np.ndarray = None  # (n,3) prescribed world angular velocity
+    bforce: np.ndarray = None  # (n,3) constant force at the centroid
+    pl_start: np.ndarray = None  # (n+1,) point loads of block i: rows pl_start[i]:pl_start[i+1]
+    pl_r: np.ndarray = None  # (p,3) body-frame offset from the centroid
+    pl_f: np.ndarray = None  # (p,3) world force
 
     @staticmethod
-    def build(blocks, materials):
+    def build(blocks, materials, point_loads=()):
         n = len(blocks)
         vs = np.zeros(n + 1, np.int64)
         fs = np.zeros(n + 1, np.int64)
@@ -215,6 +258,20 @@ class SystemArrays:
         for i, b in enumerate(blocks):
             if b.fixed:
                 vel[i] = 0.0
+        kin = np.array([b.prescribed for b in blocks], bool)
+        wpres = np.zeros((n, 3))
+        for i, b in enumerate(blocks):
+            if b.prescribed:
+                wpres[i] = b.angular_velocity
+                angmom[i] = 0.0
+        order = sorted(range(len(point_loads)), key=lambda k: point_loads[k][0])
+        pl_start = np.zeros(n + 1, np.int64)
+        for k in order:
+            pl_start[point_loads[k][0] + 1] += 1
+        pl_start = np.cumsum(pl_start).astype(np.int64)
+        pl_r = np.array([point_loads[k][1] for k in order], float).reshape(-1, 3)
+        pl_f = np.array([point_loads[k][2] for k in order], float).reshape(-1, 3)
+        bforce = np.array([b.body_force for b in blocks], float).reshape(-1, 3)
         return SystemArrays(
             names=[b.name for b in blocks],
             pos=cat(lambda b: b.pos, float, (3,)), quat=cat(lambda b: b.quat, float, (4,)), vel=vel,
@@ -230,6 +287,7 @@ class SystemArrays:
             he_pair=he_pair.astype(np.int64), he_face=he_face.astype(np.int64), vert_he=vert_he.astype(np.int64),
             face_he=face_he.astype(np.int64), edge_he=edge_he.astype(np.int64),
             face_vert_start=np.array(fv_start, np.int64), face_verts=np.array(fv, np.int64),
+            kin=kin, wpres=wpres, bforce=bforce, pl_start=pl_start, pl_r=pl_r, pl_f=pl_f,
         )
 
     @property

@@ -1,0 +1,255 @@
+"""DDA loads and prescribed motion: body loads, point loads, prescribed velocities against analytical motion."""
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from dda.blockspec import BlockSpec
+from dda.scene import scene_from_dict
+from dda.simulation import ContactLaw, Simulation
+from dda.system import BlockSystem
+from sgim.scene import SceneError
+
+G = 9.81
+
+
+def box(lo, hi, **kw):
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
+                  [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
+    f = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    return BlockSpec(v, f, **kw)
+
+
+def test_body_load_gives_uniform_acceleration():
+    bs = BlockSystem()
+    i = bs.add_block(box((0, 0, 0), (1, 2, 0.5)), density=1000.0)
+    m = 1000.0 * 1.0
+    F = np.array([300.0, -200.0, 50.0])
+    bs.add_body_load(i, F)
+    bs.add_body_load(i, F)  # loads add up
+    sim = Simulation(bs, ContactLaw(kn=1e8), gravity=(0, 0, 0), dt=1e-3)
+    res = sim.run(0.5, record_every=0.1)
+    t = res.times[-1]
+    expect = 0.5 * (2 * F / m) * t * t
+    assert np.allclose(sim.displacement(i), expect, rtol=1e-9, atol=1e-12)
+    assert np.allclose(sim.velocity(i), 2 * F / m * (t - 0.5 * sim.dt), rtol=1e-9)  # the half-step velocity
+    # the load's potential -F.x keeps the balance closed
+    KE = res.energy_column("kinetic")[-1]  # the energy of the last step, taken at t - dt
+    te = t - sim.dt
+    assert abs(KE - 0.5 * m * np.dot(2 * F / m * te, 2 * F / m * te)) < 1e-5 * KE
+    assert abs(res.energy_column("balance_error")[-1]) < 1e-5 * KE
+
+
+def test_point_load_couple_turns_the_block_like_the_pendulum_equation():
+    # cube of side a, two opposite loads +-F (along y) at +-d (along x): the torque about z is 2 d F cos(theta)
+    # as the points turn with the block, so I theta'' = 2 d F cos(theta), theta(0) = 0 (solved by scipy)
+    a, rho, d, F = 1.0, 1000.0, 0.4, 1000.0
+    bs = BlockSystem()
+    i = bs.add_block(box((-a / 2, -a / 2, -a / 2), (a / 2, a / 2, a / 2)), density=rho)
+    bs.add_point_load(i, (d, 0, 0), (0, F, 0))
+    bs.add_point_load(i, (-d, 0, 0), (0, -F, 0))
+    m = rho * a ** 3
+    inertia = m * a * a / 6
+    sim = Simulation(bs, ContactLaw(kn=1e8), gravity=(0, 0, 0), dt=2e-4)
+    R0 = sim.rotation(i)  # body principal frame at t = 0
+    T = 0.8
+    res = sim.run(T, record_every=0.2)
+    sol = solve_ivp(lambda t, y: [y[1], 2 * d * F * math.cos(y[0]) / inertia], (0, T), [0.0, 0.0],
+                    rtol=1e-11, atol=1e-12)
+    theta_ref = sol.y[0, -1]
+    R = sim.rotation(i) @ R0.T
+    theta = math.atan2(R[1, 0], R[0, 0])
+    assert theta_ref > 1.0  # a large turn, so the load really follows the block
+    assert abs(theta - theta_ref) < 1e-3 * theta_ref
+    assert np.allclose(sim.displacement(i), 0.0, atol=1e-12)  # the couple has no net force
+    # energy: the loads' potential balances the kinetic energy
+    KE = res.energy_column("kinetic")[-1]
+    assert abs(KE - 0.5 * inertia * sol.y[1, -1] ** 2) < 2e-3 * KE
+    assert abs(res.energy_column("balance_error")[-1]) < 2e-3 * KE
+
+
+def test_point_load_on_a_free_block_accelerates_the_centroid_by_f_over_m():
+    bs = BlockSystem()
+    i = bs.add_block(box((0, 0, 0), (2, 1, 1)), density=500.0)
+    F = np.array([0.0, 0.0, 2000.0])
+    bs.add_point_load(i, (2.0, 0.5, 0.5), F)  # off the centroid: it also turns the block
+    sim = Simulation(bs, ContactLaw(kn=1e8), gravity=(0, 0, 0), dt=1e-4)
+    R0 = sim.rotation(i)
+    sim.run(0.3, record_every=0.1)
+    m = 500.0 * 2.0
+    assert np.allclose(sim.displacement(i), 0.5 * F / m * sim.time ** 2, rtol=1e-9, atol=1e-12)
+    assert np.linalg.norm(sim.rotation(i) - R0) > 0.1
+
+
+def test_prescribed_block_moves_exactly_and_pushes_a_block_along_a_frictional_floor():
+    # a frictionless plate moving at v pushes a block lying on a fixed floor with friction mu: after the start the
+    # block moves with the plate, the plate does work mu m g v per second against friction
+    v, mu = 0.5, math.tan(math.radians(20.0))
+    bs = BlockSystem()
+    bs.add_block(box((-5, -2, -1), (5, 2, 0)), fixed=True)
+    b = bs.add_block(box((0, -0.5, 0), (1, 0.5, 1)), density=1000.0)
+    p = bs.add_block(box((-0.3, -0.6, 0.05), (-0.01, 0.6, 1.2), velocity=(v, 0, 0), angular_velocity=(0, 0, 0)),
+                     prescribed=True, material="plate")
+    sim = Simulation(bs, ContactLaw(kn=1e8, friction_deg=20.0, damping=0.3), dt=None,
+                     pair_laws={("rock", "plate"): ContactLaw(kn=1e8, friction_deg=0.0, damping=0.3)})
+    R0 = sim.rotation(p)
+    res = sim.run(2.0, record_every=0.1)
+    assert np.allclose(sim.displacement(p), (v * sim.time, 0, 0), rtol=1e-12, atol=1e-12)
+    assert np.allclose(sim.rotation(p), R0, atol=1e-12)
+    vb = res.velocities[-5:, b, 0]
+    assert np.all(np.abs(vb - v) < 1e-3 * v)
+    # the block's travel: the plate's travel less the initial gap and the contact overlap
+    gap = 0.01
+    assert abs(sim.displacement(b)[0] - (v * sim.time - gap)) < 5e-3
+    # driver work: mu m g v per second while pushing (energy balance closed by the potential column)
+    m = 1000.0
+    fr = res.energy_column("friction")
+    k0, k1 = len(res.times) // 2, len(res.times) - 1
+    rate = (fr[k1] - fr[k0]) / (res.times[k1] - res.times[k0])
+    assert abs(rate - mu * m * G * v) < 0.02 * mu * m * G * v
+    assert abs(res.energy_column("balance_error")[-1]) < 0.02 * fr[-1]
+
+
+def test_prescribed_rotation_turns_at_the_given_rate():
+    bs = BlockSystem()
+    bs.add_block(box((-1, -1, -1), (1, 1, 1)), fixed=True)
+    p = bs.add_block(box((3, -0.5, -0.5), (4, 0.5, 0.5), angular_velocity=(0, 0, 2.0)), prescribed=True)
+    bs.add_block(box((-0.5, -0.5, 5), (0.5, 0.5, 6)))
+    sim = Simulation(bs, ContactLaw(kn=1e8), gravity=(0, 0, -G))
+    R0 = sim.rotation(p)
+    sim.run(0.5, record_every=0.1)
+    R = sim.rotation(p) @ R0.T
+    assert abs(math.atan2(R[1, 0], R[0, 0]) - 2.0 * sim.time) < 1e-9
+    assert np.allclose(sim.displacement(p), 0, atol=1e-12)
+
+
+def _scene(**extra):
+    d = {
+        "simulation": {"duration": 0.2, "dt": 1e-3, "gravity": [0, 0, 0]},
+        "contact": {"kn": 1e8},
+        "block": [
+            {"name": "free", "shape": "cube", "size": 1.0, "center": [0, 0, 0], "force": [100.0, 0, 0]},
+            {"name": "plate", "shape": "cube", "size": 1.0, "center": [10, 0, 0], "prescribed": True,
+             "velocity": [0, 1.0, 0]},
+        ],
+        "load": [{"block": "free", "force": [0, 0, 300.0]},
+                 {"block": "free", "force": [0, 50.0, 0], "point": [0, 0, 0]}],
+    }
+    d.update(extra)
+    return d
+
+
+def test_scene_keys_for_loads_and_prescribed_blocks():
+    sc = scene_from_dict(_scene())
+    bs, sim = sc.build()
+    sim.run(0.2, record_every=0.1)
+    m = 2600.0
+    t = sim.time
+    assert np.allclose(sim.displacement(0), 0.5 * np.array([100.0, 50.0, 300.0]) / m * t * t, rtol=1e-9)
+    assert np.allclose(sim.displacement(1), (0, t, 0), rtol=1e-12)
+
+
+@pytest.mark.parametrize("patch,key", [
+    ({"load": [{"block": "nope", "force": [1, 0, 0]}]}, "load[0].block"),
+    ({"load": [{"block": "free", "force": [1, 0]}]}, "load[0].force"),
+    ({"load": [{"block": "free", "force": [1, 0, 0], "where": 1}]}, "load[0]"),
+])
+def test_bad_load_keys_are_scene_errors(patch, key):
+    with pytest.raises(SceneError) as ei:
+        scene_from_dict(_scene(**patch))
+    assert key in str(ei.value)
+
+
+def test_fixed_and_prescribed_is_a_scene_error():
+    d = _scene()
+    d["block"][1]["fixed"] = True
+    with pytest.raises(SceneError) as ei:
+        scene_from_dict(d)
+    assert "prescribed" in str(ei.value)
+
+
+# ---------------------------------------------------------------- resting blocks sleep
+def _stack_and_projectile(arrive=0.75):
+    bs = BlockSystem()
+    bs.add_block(box((-6, -2, -1), (3, 2, 0)), fixed=True)
+    ids = [bs.add_block(box((-0.5, -0.5, k * 1.0), (0.5, 0.5, k * 1.0 + 1.0))) for k in range(3)]
+    # ballistic projectile reaching the top block's face (x = -0.5) at height 2.5 at t = arrive
+    p = bs.add_block(box((-4.75, -0.25, 2.25), (-4.25, 0.25, 2.75), velocity=(3.75 / arrive, 0, G * arrive / 2)))
+    return bs, ids, p
+
+
+def _run(sleep, t1, t2):
+    bs, ids, p = _stack_and_projectile()
+    sim = Simulation(bs, ContactLaw(kn=1e9, friction_deg=30.0, damping=0.2), sleep=sleep)
+    sim.run(t1, record_every=0.1)
+    before = (sim.asleep.copy(), len(sim.active), sim.pos.copy())
+    res = sim.run(t2, record_every=0.05)
+    return sim, res, ids, p, before
+
+
+def test_resting_stack_sleeps_wakes_when_hit_and_matches_the_run_without_sleeping():
+    a, ra, ids, p, (asleep_a, nact_a, pos_a) = _run(True, 0.6, 0.25)
+    b, rb, _, _, (_, _, pos_b) = _run(False, 0.6, 0.25)
+    # before the impact the stack rests: every stack block sleeps, only the projectile is integrated
+    assert asleep_a[ids].all() and not asleep_a[p]
+    assert nact_a == 1
+    assert np.abs(pos_a - pos_b).max() < 1e-6
+    # the projectile struck the top block (it moved by centimetres) and woke the stack
+    assert np.linalg.norm(b.displacement(ids[2])) > 0.01
+    assert not a.asleep[ids[2]]
+    # 0.1 s after the impact both runs agree (an impact amplifies differences of 1e-6 in the initial
+    # velocity to about 1e-5 m here)
+    assert np.abs(a.pos - b.pos).max() < 1e-5
+    assert np.abs(a.vel - b.vel).max() < 1e-3
+
+
+def test_settled_stack_costs_no_integration_and_keeps_its_energy_balance():
+    bs = BlockSystem()
+    bs.add_block(box((-3, -2, -1), (3, 2, 0)), fixed=True)
+    ids = [bs.add_block(box((-0.5, -0.5, k * 1.0), (0.5, 0.5, k * 1.0 + 1.0))) for k in range(3)]
+    sims = {}
+    for sleep in (False, True):
+        sim = Simulation(bs, ContactLaw(kn=1e9, friction_deg=30.0, damping=0.2), sleep=sleep)
+        res = sim.run(1.0, record_every=0.1)
+        sims[sleep] = (sim, res)
+    s1, r1 = sims[True]
+    s0, r0 = sims[False]
+    assert s1.n_asleep == 3 and len(s1.active) == 0 and s0.n_asleep == 0
+    assert np.abs(s1.pos - s0.pos).max() < 1e-7
+    # the carried contacts keep the elastic energy of the sleeping stack; the balance stays closed
+    e1 = r1.energy_column("elastic")[-1]
+    e0 = r0.energy_column("elastic")[-1]
+    assert abs(e1 - e0) < 1e-3 * e0
+    scale = 3 * 2600.0 * G * 1e-3
+    assert abs(r1.energy_column("balance_error")[-1]) < 1e-3 * scale
+    # resting contacts are still reported
+    assert len(s1.contacts()["a"]) == len(s0.contacts()["a"])
+
+
+def test_two_calm_blocks_touching_fall_asleep_together_and_stay_still():
+    # each block touches the other, which is awake but calm: the pair must fall asleep together
+    bs = BlockSystem()
+    bs.add_block(box((-3, -2, -1), (3, 2, 0)), fixed=True)
+    bs.add_block(box((-0.5, -0.5, 0), (0.5, 0.5, 1)))
+    bs.add_block(box((-0.4, -0.4, 1.0), (0.4, 0.4, 1.5)))
+    sim = Simulation(bs, ContactLaw(kn=1e9, friction_deg=30.0, damping=0.2), sleep=True, sleep_steps=50)
+    sim.run(1.0, record_every=0.5)
+    assert sim.n_asleep == 2
+    p = sim.pos.copy()
+    sim.run(0.5, record_every=0.5)
+    assert np.array_equal(sim.pos, p)
+
+
+def test_sleep_scene_keys():
+    d = _scene()
+    d["simulation"].update(sleep=True, sleep_velocity=1e-3, sleep_accel=0.01, sleep_steps=10)
+    sc = scene_from_dict(d)
+    assert sc.sleep == {"sleep": True, "sleep_velocity": 1e-3, "sleep_accel": 0.01, "sleep_steps": 10}
+    _, sim = sc.build()
+    assert list(sim.sleep_par) == [1.0, 1e-3, 0.01, 10.0]
+    d["simulation"]["sleep_steps"] = 0
+    with pytest.raises(SceneError):
+        scene_from_dict(d)
