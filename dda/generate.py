@@ -80,7 +80,7 @@ def incline(angle=30.0, size=1.0, height=None, base_length=10.0, base_thickness=
 
 
 def wedge(joint_a=(45.0, 5.0), joint_b=(55.0, 135.0), face=(65.0, 65.0), top=(0.0, 0.0), height=10.0,
-          margin=0.5, material="rock"):
+          margin=0.5, material="rock", crease=1e-3):
     """The Hoek & Bray wedge and three fixed blocks holding it (see module docstring)."""
     a, b, f, t, dt, verts = hoekbray.wedge_geometry(tuple(joint_a), tuple(joint_b), tuple(face),
                                                     None if top is None else tuple(top), float(height))
@@ -91,9 +91,14 @@ def wedge(joint_a=(45.0, 5.0), joint_b=(55.0, 135.0), face=(65.0, 65.0), top=(0.
     hi[2] = max(hi[2], verts[:, 2].max() + margin * ext)
     domain = box(lo, hi)
     out = [w]
-    for name, sa, sb in (("below_a", 1, -1), ("below_b", -1, 1), ("below_ab", 1, 1)):
+    # below_ab stops short of the line of intersection by a thin void (crease = 1e-3 x the wedge size): the
+    # wedge's lower edge then rests on below_a and below_b alone, each bearing by its own joint plane, and a
+    # third block meeting the edge at a point of two planes cannot take over part of the load on a normal
+    # chosen by the penetration depths
+    sink = crease * ext
+    for name, sa, sb, off in (("below_a", 1, -1, 0.0), ("below_b", -1, 1, 0.0), ("below_ab", 1, 1, sink)):
         piece = domain
-        for plane in ((sa * a, 0.0), (sb * b, 0.0), (f, 0.0), (t, dt)):
+        for plane in ((sa * a, -off), (sb * b, -off), (f, 0.0), (t, dt)):
             piece = _cut.clip(piece, plane)
             if piece is None:
                 raise GeometryError(f"wedge: fixed block {name} is empty; increase margin")

@@ -27,6 +27,7 @@ compresses the springs by ``--penetration`` (default 1e-5) times the wedge's siz
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
 import sys
@@ -111,7 +112,8 @@ class WedgeModel:
     """The DDA wedge: blocks from ``dda.generate.wedge`` and one sliding test per friction angle."""
 
     def __init__(self, joint_a, joint_b, face, top=(0.0, 0.0), height=10.0, unit_weight=25.506, kn=None,
-                 penetration=1e-5, duration=1.5, resolution=1e-3, damping=0.3, safety=0.5):
+                 penetration=1e-5, duration=1.5, resolution=1e-3, damping=0.3, safety=0.25, settle=0.5,
+                 settle_friction=60.0):
         from .generate import wedge as wedge_blocks
 
         self.geom = hoekbray.wedge_fs(joint_a, joint_b, face, top=top, friction=30.0, unit_weight=unit_weight,
@@ -127,24 +129,43 @@ class WedgeModel:
         self.damping = float(damping)
         self.safety = float(safety)
         self.threshold = 7.0 / 32.0 * G * math.sin(math.radians(self.geom.line_plunge)) * resolution * duration ** 2
+        self.settle = float(settle)
+        self.settle_friction = float(settle_friction)
+        self._settled = None
         self.runs = []
 
-    def run(self, phi):
-        """Displacements along the line of intersection at 1/2, 3/4 and 1 of the duration."""
-        from .simulation import ContactLaw, Simulation
-        from .system import BlockSystem
+    def settled(self):
+        """The simulation after the wedge has settled into its groove at ``settle_friction`` (built once).
 
-        bs = BlockSystem()
-        for s in self.specs:
-            bs.add_block(s, density=self.density)
-        law = ContactLaw(kn=self.kn, ks=self.kn / 2, friction_deg=float(phi), damping=self.damping)
-        sim = Simulation(bs, law, gravity=(0.0, 0.0, -G), safety=self.safety)
+        Starting a trial from rest with the joints already loaded is what the paper does when it lowers the
+        friction step by step: a wedge released at its trial friction would first slip while its normal forces
+        build up, and a wedge near its limit (FS close to 1) would carry that slip on at nearly constant speed,
+        which hides whether it accelerates."""
+        if self._settled is None:
+            from .simulation import ContactLaw, Simulation
+            from .system import BlockSystem
+
+            bs = BlockSystem()
+            for s in self.specs:
+                bs.add_block(s, density=self.density)
+            law = ContactLaw(kn=self.kn, ks=self.kn / 2, friction_deg=self.settle_friction, damping=self.damping)
+            sim = Simulation(bs, law, gravity=(0.0, 0.0, -G), safety=self.safety)
+            sim.run(self.settle, record_every=self.settle)
+            self._settled = sim
+        return self._settled
+
+    def run(self, phi):
+        """Displacements along the line of intersection at 1/2, 3/4 and 1 of the duration, counted from the
+        settled state, after the friction of every contact is lowered to ``phi``."""
+        sim = copy.deepcopy(self.settled())
+        sim.lawtab[:, :, 2] = math.tan(math.radians(float(phi)))
+        s0 = float(sim.displacement(0) @ self.line)
         marks = []
         t = 0.0
         for frac in (0.5, 0.75, 1.0):
             sim.run(frac * self.duration - t, record_every=self.duration)
             t = frac * self.duration
-            marks.append(float(sim.displacement(0) @ self.line))
+            marks.append(float(sim.displacement(0) @ self.line) - s0)
         self.runs.append((phi, marks, sim.steps))
         return marks
 
