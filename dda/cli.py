@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 EXIT_BAD_INPUT = 2
 EXIT_BLOWUP = 3
 
@@ -51,6 +53,62 @@ def _write_outputs(scene, sim, res, tmp, frames, summary, say):
     (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
 
 
+def _run_spheres(scene, out, args, say, t0):
+    """`dda run` of a scene with [spheres]: series.npz (positions, energies, intact bonds per record, the final
+    bond state), spheres.vtu (final state) and summary.json."""
+    from .simulation import BlowUpError
+
+    ss, sim = scene.build_spheres()
+    if say:
+        say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
+            f"{len(scene.blocks)} walls, dt = {sim.dt:.3g} s (critical {sim.dt_crit:.3g} s)")
+    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        status, message = "ok", ""
+        try:
+            res = sim.run(scene.duration, record_every=scene.record_every, progress=say)
+        except BlowUpError as exc:
+            status, message, res = "blow-up", str(exc), exc.results
+        res.save(tmp / "series.npz", sim)
+        if "vtu" in scene.formats:
+            import meshio
+
+            meshio.write(str(tmp / "spheres.vtu"), meshio.Mesh(
+                sim.x, [("vertex", np.arange(ss.n).reshape(-1, 1))],
+                point_data={"radius": ss.radii, "fixed": ss.fixed.astype(np.int32),
+                            "displacement": sim.displacement(), "velocity": sim.v}))
+        e = res.energy[-1]
+        summary = {
+            "scene": scene.name, "scene_path": str(scene.path), "status": status, "message": message,
+            "spheres": ss.n, "fixed": int(ss.fixed.sum()), "bonds": ss.n_bonds,
+            "bonds_intact": int(sim.bond_intact.sum()), "walls": len(scene.blocks), "dt": sim.dt,
+            "dt_critical": sim.dt_crit, "steps": sim.steps, "time": sim.time,
+            "wall_s": round(time.perf_counter() - t0, 3),
+            "energy_final": dict(zip(("kinetic", "potential", "elastic", "friction", "damping", "local_damping",
+                                      "balance_error"), [float(x) for x in e])),
+        }
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
+        if out.exists():
+            old = out.with_name(f".{out.name}.old{os.getpid()}")
+            os.replace(out, old)
+            os.replace(tmp, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if status != "ok":
+        print(f"dda: error: {message} (last good state written to {out})", file=sys.stderr)
+        return EXIT_BLOWUP
+    if not args.quiet:
+        print(f"{out}: {ss.n} spheres, {sim.steps} steps to t = {sim.time:.4g} s in {summary['wall_s']:.2f} s, "
+              f"{summary['bonds_intact']} of {ss.n_bonds} bonds intact")
+    return 0
+
+
 def cmd_run(args):
     from .scene import load_scene
     from .simulation import BlowUpError
@@ -61,6 +119,8 @@ def cmd_run(args):
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: -o = {str(out)!r}: output exists and is not a folder")
+    if scene.spheres:
+        return _run_spheres(scene, out, args, say, t0)
     bs, sim = scene.build()
     if say:
         say(f"scene      {scene.name}: {bs.n_blocks} blocks ({len(sim.active)} moving), dt = {sim.dt:.3g} s "

@@ -20,6 +20,11 @@ written. Keys::
     [[load]]       block = "name", force = [fx, fy, fz] (N, world), point = [x, y, z] (world, initial pose;
                    absent: the centroid): a constant point load
     [[generate]]   kind = one of dda.generate.GENERATORS, the other keys are its parameters
+    [spheres]      model = "model.npz" (an sgim model, relative to the scene), density = 2600, fixed = ["z>2.6"]
+                   (regions of fixed spheres), bond_young (Pa) = 1e9 or bond_kn / bond_ks (N/m), bond_shear_ratio
+                   = 0.4, bond_tensile / bond_shear (Pa, default unbreakable), bond_damping, bond_radius_factor = 1;
+                   only the model's bonded pairs get bonds; [contact] is the sphere contact law; every block is a
+                   fixed wall (see dda/spheres.py)
     [output]       formats = ["npz", "csv", "vtu", "png"]
     [render]       width = 1600, height = 1100
 """
@@ -37,7 +42,9 @@ from .simulation import ContactLaw
 
 OUTPUT_FORMATS = ("npz", "csv", "vtu", "png")
 TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact_pair", "block", "generate",
-            "output", "render", "load"}
+            "output", "render", "load", "spheres"}
+SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", "bond_shear_ratio", "bond_tensile",
+               "bond_shear", "bond_damping", "bond_radius_factor"}
 LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
 
 
@@ -71,6 +78,19 @@ class DDAScene:
     sources: list = field(default_factory=list)  # scene key that produced each block
     loads: list = field(default_factory=list)  # (block index, world point or None, force)
     sleep: dict = field(default_factory=dict)  # Simulation sleep keywords
+    spheres: dict = field(default_factory=dict)  # [spheres]: model path, density, BondLaw, fixed regions
+
+    def build_spheres(self):
+        """SphereSet and SphereSimulation of a scene with [spheres] (its blocks are fixed walls)."""
+        from .spheres import SphereSimulation, load_model
+
+        sp = self.spheres
+        ss = load_model(sp["model"], density=sp["density"], bonds=sp["bonds"])
+        for axis, sign, value in sp["fixed"]:
+            ss.fixed |= sign * (ss.centers[:, axis] - value) > 0
+        sim = SphereSimulation(ss, self.law, walls=self.blocks, gravity=self.gravity, dt=self.dt, safety=self.safety,
+                               local_damping=self.local_damping)
+        return ss, sim
 
     def build(self):
         """BlockSystem and Simulation of the scene."""
@@ -92,6 +112,52 @@ class DDAScene:
         sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
                          local_damping=self.local_damping, pair_laws=self.pair_laws, **self.sleep)
         return bs, sim
+
+
+def _read_spheres(rd, data, path):
+    """[spheres] model = "model.npz" (sgim, relative to the scene), density, fixed = ["z>2.6"], bond_* keys."""
+    if "spheres" not in data:
+        return {}
+    from sgim.scene import parse_cut
+
+    from .spheres import BondLaw
+
+    st = rd.table(data, "spheres", "spheres")
+    rd.known(st, SPHERE_KEYS, "spheres")
+    name = rd.string(st, "model", "spheres.model", "")
+    if not name:
+        rd.err("spheres.model", name, "missing: the path of an sgim model.npz")
+    mp = Path(name) if Path(name).is_absolute() else Path(path).parent / name
+    if not mp.is_file():
+        rd.err("spheres.model", name, f"no such file ({mp})")
+    fixed = st.get("fixed", [])
+    if not isinstance(fixed, list):
+        rd.err("spheres.fixed", fixed, 'must be a list like ["z>2.6"]')
+    regions = []
+    for e in fixed:
+        try:
+            regions.append(parse_cut(e))
+        except ValueError as exc:
+            rd.err("spheres.fixed", e, str(exc))
+    inf = float("inf")
+    law = BondLaw(
+        young=rd.number(st, "bond_young", "spheres.bond_young", default=1e9, positive=True),
+        kn=rd.number(st, "bond_kn", "spheres.bond_kn", positive=True) if "bond_kn" in st else None,
+        ks=rd.number(st, "bond_ks", "spheres.bond_ks", positive=True) if "bond_ks" in st else None,
+        shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio", default=0.4, positive=True),
+        tensile=rd.number(st, "bond_tensile", "spheres.bond_tensile", default=inf, nonneg=True),
+        shear=rd.number(st, "bond_shear", "spheres.bond_shear", default=inf, nonneg=True),
+        damping=rd.number(st, "bond_damping", "spheres.bond_damping", default=0.0, nonneg=True, hi=1.0),
+        radius_factor=rd.number(st, "bond_radius_factor", "spheres.bond_radius_factor", default=1.0, positive=True),
+    )
+    try:
+        from sgim.model import SphereModel
+
+        model = SphereModel.load(mp)
+    except (OSError, ValueError, KeyError) as exc:
+        rd.err("spheres.model", name, f"cannot read the model ({str(exc).splitlines()[0]})")
+    density = rd.number(st, "density", "spheres.density", default=2600.0, positive=True)
+    return {"model": model, "path": str(mp), "density": density, "bonds": law, "fixed": regions}
 
 
 def _law(rd, tab, key, base=None):
@@ -198,7 +264,8 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
             rd.err(key, sorted(params), str(exc).split("\n")[0])
         blocks.extend(made)
         sources.extend([key] * len(made))
-    if not blocks:
+    spheres = _read_spheres(rd, data, path)
+    if not blocks and not spheres:
         rd.err("block", None, "the scene has no blocks (give [[block]] or [[generate]] tables)")
     from .polyhedra import PolyhedronError, check_convex, half_edges
 
@@ -216,7 +283,11 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         for m in (m1, m2):
             if m not in materials and m != "rock":
                 rd.err("contact_pair", m, "unknown material")
-    if all(getattr(b, "fixed", False) for b in blocks):
+    if spheres:
+        for spec, src in zip(blocks, sources):
+            if not getattr(spec, "fixed", False):
+                rd.err(f"{src}.fixed", False, "with [spheres] every block must be fixed (a wall)")
+    elif all(getattr(b, "fixed", False) for b in blocks):
         rd.err("block", len(blocks), "every block is fixed: nothing would move")
     for spec, src in zip(blocks, sources):
         if getattr(spec, "prescribed", False) and spec.fixed:
@@ -248,7 +319,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         record_every=record_every, frames=frames, formats=tuple(formats),
         width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
         height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources,
-        loads=loads, sleep=sleep)
+        loads=loads, sleep=sleep, spheres=spheres)
 
 
 BLOCK_KEYS = {"name", "fixed", "material", "velocity", "angular_velocity", "prescribed", "force", "shape", "size", "center", "rotation_axis",

@@ -1,0 +1,377 @@
+"""Spheres and bonds in the explicit engine: sgim's bonded-sphere models (model.npz) under gravity and loads.
+
+Usage::
+
+    from dda.spheres import SphereSet, BondLaw, SphereSimulation, load_model
+    ss = load_model("model.npz", density=2600.0, bonds=BondLaw(young=1e9, tensile=1e6, shear=1e6))
+    ss.fixed[ss.centers[:, 2] > 9.5] = True                 # or SphereSet(centers, radii, ...) + add_bonds
+    sim = SphereSimulation(ss, ContactLaw(kn=1e7, friction_deg=30), walls=[floor_spec], gravity=(0, 0, -9.81))
+    res = sim.run(1.0, record_every=0.01)                  # SphereResults: time, pos, energy, bonds intact
+    sim.bond_intact, sim.bond_break_time, sim.displacement()
+
+Bodies are spheres with 6 DOF (solid-sphere inertia 2/5 m r^2); ``fixed`` spheres never move, ``prescribed``
+ones move at their velocity / angular velocity whatever the forces; ``body_force`` adds a constant force.
+Walls are fixed convex polyhedra (BlockSpec-like: ``vertices``, ``faces``): a sphere touches a wall at the
+polyhedron's closest point (face, edge or vertex). Moving polyhedral blocks together with spheres are not
+supported here (use dda.simulation for blocks).
+
+Contacts (sphere-sphere without an intact bond, sphere-wall) follow the block engine's law at one point
+(dda/_contact.py: kn, ks per contact, friction, damping; no cohesion). Bonds (only the pairs of the model's
+bond list whose ``bonded`` flag is set): a normal spring on the change of centre distance and a shear spring
+on the tangential displacement at the bond point; ``BondLaw`` gives them from a bond modulus over the bond
+area A = pi (radius_factor min(r_i, r_j))^2 and length L0 = initial centre distance (kn = E A / L0, ks =
+shear_ratio kn) or directly as ``kn`` / ``ks`` [N/m]; the tensile and shear strengths [Pa] times A are the
+forces at which the bond breaks (for good). Bond states are reported per record (``SphereResults.bonds``)
+and the time each bond broke in ``bond_break_time`` (-1: intact).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _spheres as _sp
+from .simulation import BlowUpError, ContactLaw
+
+ENERGY_COLUMNS = ("kinetic", "potential", "elastic", "friction", "damping", "local_damping", "balance_error")
+
+
+@dataclass
+class BondLaw:
+    young: float | None = 1e9      # bond modulus [Pa] (kn = young A / L0), unless kn is given
+    shear_ratio: float = 0.4       # ks / kn, unless ks is given
+    tensile: float = math.inf      # tensile strength [Pa] on the bond area
+    shear: float = math.inf        # shear strength [Pa] on the bond area
+    damping: float = 0.0           # ratio of critical viscous damping of the bond springs
+    radius_factor: float = 1.0     # bond radius = radius_factor min(r_i, r_j)
+    kn: float | None = None        # [N/m], overrides young
+    ks: float | None = None        # [N/m], overrides shear_ratio
+
+    def check(self):
+        if self.kn is None and not (self.young is not None and self.young > 0):
+            raise ValueError(f"bond modulus must be > 0 (got {self.young!r})")
+        for name in ("kn", "ks"):
+            val = getattr(self, name)
+            if val is not None and not val > 0:
+                raise ValueError(f"bond {name} must be > 0 (got {val!r})")
+        if not (self.shear_ratio > 0 and self.radius_factor > 0):
+            raise ValueError("bond shear_ratio and radius_factor must be > 0")
+        if not (self.tensile >= 0 and self.shear >= 0 and self.damping >= 0):
+            raise ValueError("bond strengths and damping must be >= 0")
+
+
+class SphereSet:
+    """Spheres (centres, radii, density) with per-sphere flags, loads and a bond list."""
+
+    def __init__(self, centers, radii, density=2600.0):
+        self.centers = np.ascontiguousarray(np.asarray(centers, float).reshape(-1, 3))
+        self.radii = np.ascontiguousarray(np.asarray(radii, float).reshape(-1))
+        n = len(self.radii)
+        if len(self.centers) != n:
+            raise ValueError("centers and radii differ in length")
+        if n == 0:
+            raise ValueError("no spheres")
+        if not (np.all(self.radii > 0) and np.all(np.isfinite(self.centers))):
+            raise ValueError("radii must be > 0 and centres finite")
+        if not density > 0:
+            raise ValueError(f"density must be > 0 (got {density!r})")
+        self.density = float(density)
+        self.mass = density * 4.0 / 3.0 * np.pi * self.radii ** 3
+        self.fixed = np.zeros(n, bool)
+        self.prescribed = np.zeros(n, bool)
+        self.velocity = np.zeros((n, 3))
+        self.angular_velocity = np.zeros((n, 3))
+        self.body_force = np.zeros((n, 3))
+        self.bond_i = np.zeros(0, np.int64)
+        self.bond_j = np.zeros(0, np.int64)
+        self.bond_len0 = np.zeros(0)
+        self.bond_kn = np.zeros(0)
+        self.bond_ks = np.zeros(0)
+        self.bond_ft = np.zeros(0)
+        self.bond_fs = np.zeros(0)
+        self.bond_zeta = np.zeros(0)
+
+    @property
+    def n(self):
+        return len(self.radii)
+
+    @property
+    def n_bonds(self):
+        return len(self.bond_i)
+
+    def add_bonds(self, pairs, law: BondLaw):
+        """Bond the sphere pairs (m, 2) with `law`; returns the bond indices."""
+        law.check()
+        p = np.asarray(pairs, np.int64).reshape(-1, 2)
+        if len(p) and (p.min() < 0 or p.max() >= self.n or np.any(p[:, 0] == p[:, 1])):
+            raise ValueError("bond pairs must name two different spheres of the set")
+        i = np.minimum(p[:, 0], p[:, 1])
+        j = np.maximum(p[:, 0], p[:, 1])
+        L0 = np.linalg.norm(self.centers[j] - self.centers[i], axis=1)
+        rb = law.radius_factor * np.minimum(self.radii[i], self.radii[j])
+        area = np.pi * rb * rb
+        kn = np.full(len(p), float(law.kn)) if law.kn is not None else law.young * area / L0
+        ks = np.full(len(p), float(law.ks)) if law.ks is not None else law.shear_ratio * kn
+        first = self.n_bonds
+        self.bond_i = np.r_[self.bond_i, i]
+        self.bond_j = np.r_[self.bond_j, j]
+        self.bond_len0 = np.r_[self.bond_len0, L0]
+        self.bond_kn = np.r_[self.bond_kn, kn]
+        self.bond_ks = np.r_[self.bond_ks, ks]
+        self.bond_ft = np.r_[self.bond_ft, law.tensile * area]
+        self.bond_fs = np.r_[self.bond_fs, law.shear * area]
+        self.bond_zeta = np.r_[self.bond_zeta, np.full(len(p), float(law.damping))]
+        keys = self.bond_i * self.n + self.bond_j
+        if len(np.unique(keys)) != len(keys):
+            raise ValueError("a sphere pair is bonded twice")
+        return np.arange(first, self.n_bonds)
+
+
+def load_model(model, density=2600.0, bonds: BondLaw | None = None) -> SphereSet:
+    """SphereSet from an sgim model (a SphereModel or the path of a model.npz): its spheres, and bonds (with
+    `bonds`, default BondLaw()) on the pairs of its bond list whose ``bonded`` flag is set."""
+    if not hasattr(model, "centers"):
+        from sgim.model import SphereModel
+
+        model = SphereModel.load(model)
+    ss = SphereSet(model.centers, model.radii, density)
+    pairs = np.asarray(model.bonds, np.int64).reshape(-1, 2)[np.asarray(model.bonded, bool)]
+    ss.add_bonds(pairs, bonds or BondLaw())
+    return ss
+
+
+@dataclass
+class SphereResults:
+    time: list = field(default_factory=list)
+    pos: list = field(default_factory=list)
+    vel: list = field(default_factory=list)
+    energy: list = field(default_factory=list)
+    contacts: list = field(default_factory=list)
+    wall_contacts: list = field(default_factory=list)
+    bonds: list = field(default_factory=list)  # intact bonds at each record
+    wall_s: float = 0.0
+    dt: float = 0.0
+
+    @property
+    def times(self):
+        return np.asarray(self.time)
+
+    def energy_column(self, name):
+        return np.asarray(self.energy)[:, ENERGY_COLUMNS.index(name)]
+
+    def save(self, path, sim):
+        """series npz: time, pos (r, n, 3), vel, energy, contacts, wall_contacts, bonds; and the final bond state
+        (bond_i, bond_j, bond_intact, bond_break_time)."""
+        np.savez_compressed(path, time=self.times, pos=np.asarray(self.pos), vel=np.asarray(self.vel),
+                            energy=np.asarray(self.energy), energy_columns=np.array(ENERGY_COLUMNS),
+                            contacts=np.asarray(self.contacts), wall_contacts=np.asarray(self.wall_contacts),
+                            bonds=np.asarray(self.bonds), radii=sim.spheres.radii, fixed=sim.spheres.fixed,
+                            bond_i=sim.spheres.bond_i, bond_j=sim.spheres.bond_j, bond_intact=sim.bond_intact,
+                            bond_break_time=sim.bond_break_time)
+
+
+def _wall_arrays(walls):
+    """World geometry of fixed convex polyhedra: vertices, face planes, face loops, per-wall ranges, boxes."""
+    from .polyhedra import check_convex, face_planes, half_edges
+
+    verts, fn, fd, fvs, fv, fstart, boxes = [], [], [], [0], [], [0], []
+    nv = 0
+    for s in walls or []:
+        v = np.asarray(s.vertices, float).reshape(-1, 3)
+        faces = [list(map(int, f)) for f in s.faces]
+        half_edges(len(v), faces)
+        check_convex(v, faces)
+        n_, d_ = face_planes(v, faces)
+        verts.append(v)
+        fn.append(n_)
+        fd.append(d_)
+        for f in faces:
+            fv.extend(x + nv for x in f)
+            fvs.append(len(fv))
+        nv += len(v)
+        fstart.append(fstart[-1] + len(faces))
+        boxes.append(np.r_[v.min(0), v.max(0)])
+    cat = (lambda a, sh: np.ascontiguousarray(np.concatenate(a)) if a else np.zeros(sh))
+    return (cat(verts, (0, 3)), cat(fn, (0, 3)), cat(fd, (0,)), np.array(fvs, np.int64), np.array(fv, np.int64),
+            np.array(fstart, np.int64), np.array(boxes, float).reshape(-1, 6))
+
+
+class SphereSimulation:
+    """Explicit run of a SphereSet (and fixed polyhedral walls): the sphere counterpart of dda.Simulation.
+
+    `walls`: BlockSpecs (or a BlockSystem whose blocks are all fixed), `wall_law`: their ContactLaw (default
+    `law`). dt None: `safety` times the critical step (2 / omega for the stiffest sphere: its bonds plus four
+    contacts, shear springs counted with the rotational factor 1 + 1 / (2/5))."""
+
+    def __init__(self, spheres: SphereSet, law: ContactLaw | None = None, walls=None, wall_law=None,
+                 gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5, local_damping=0.0, record_positions=True):
+        self.spheres = ss = spheres
+        self.law = law or ContactLaw()
+        self.gravity = np.asarray(gravity, float).reshape(3)
+        self.local_damping = float(local_damping)
+        self.record_positions = bool(record_positions)
+        if ss.n_bonds and not np.all(np.isfinite(ss.bond_kn)):
+            raise ValueError("bond stiffness must be finite")
+        if hasattr(walls, "arrays"):
+            A = walls.arrays()
+            if not np.all(A.fixed):
+                raise NotImplementedError("spheres run with fixed polyhedral walls only")
+            from .blockspec import BlockSpec
+            from .system import quat_to_matrix
+
+            specs = []
+            for i in range(A.n):
+                v = A.pos[i] + A.vloc[A.vert_start[i]:A.vert_start[i + 1]] @ quat_to_matrix(A.quat[i]).T
+                faces = [list(A.face_verts[A.face_vert_start[f]:A.face_vert_start[f + 1]] - A.vert_start[i])
+                         for f in range(A.face_start[i], A.face_start[i + 1])]
+                specs.append(BlockSpec(v, faces))
+            walls = specs
+        walls = list(walls or [])
+        self.wvert, self.wfn, self.wfd, self.wfv_start, self.wfv, self.wface_start, self.waabb = _wall_arrays(walls)
+        row = np.array(self.law.row(), float)
+        wrow = np.array((wall_law or self.law).row(), float)
+        self.lawrow = row
+        self.wall_lawrow = np.ascontiguousarray(np.tile(wrow, (len(walls), 1)).reshape(-1, 6))
+        n = ss.n
+        self.x = ss.centers.copy()
+        self.x0 = ss.centers.copy()
+        self.v = np.where(ss.fixed[:, None], 0.0, ss.velocity).astype(float)
+        self.w = np.where(ss.fixed[:, None], 0.0, ss.angular_velocity).astype(float)
+        self.m = ss.mass.copy()
+        self.inertia = 0.4 * ss.mass * ss.radii ** 2
+        self.fixed = ss.fixed.copy()
+        self.kin = ss.prescribed & ~ss.fixed
+        self.bforce = np.ascontiguousarray(ss.body_force, float)
+        self.bond_us = np.zeros((ss.n_bonds, 3))
+        self.bond_intact = np.ones(ss.n_bonds, bool)
+        self.bond_fn = np.zeros(ss.n_bonds)
+        self.bond_break_time = np.full(ss.n_bonds, -1.0)
+        self.bkey_tab, self.bkey_slot = _sp.build_bond_hash(ss.bond_i, ss.bond_j, n)
+        self._alloc(max(64, 8 * n))
+        self.energy = np.zeros(6)
+        self.acc = np.zeros(1)
+        self.stats = np.zeros(5)
+        self.dt_crit = self.critical_dt()
+        self.dt = float(dt) if dt is not None else float(safety) * self.dt_crit
+        if not self.dt > 0:
+            raise ValueError(f"time step must be > 0 (got {dt!r})")
+        self.dt_prev = 0.0
+        self.time = 0.0
+        self.steps = 0
+        self.E0 = None
+
+    def _alloc(self, cap):
+        self.cur = np.zeros(1, np.int64)
+        self.c_n = np.zeros(2, np.int64)
+        self.c_key = np.zeros((2, cap), np.int64)
+        self.c_us = np.zeros((2, cap, 3))
+        self.c_fn = np.zeros((2, cap))
+        self.c_ij = np.zeros((2, cap, 2), np.int64)
+        hs = 16
+        while hs < 2 * cap + 16:
+            hs *= 2
+        self.htab = np.full(hs, -1, np.int64)
+
+    def critical_dt(self):
+        ss = self.spheres
+        free = ~(self.fixed | self.kin)
+        if not free.any():
+            return 1.0
+        kn, ks = self.lawrow[0], self.lawrow[1]
+        if len(self.wall_lawrow):
+            kn = max(kn, self.wall_lawrow[:, 0].max())
+            ks = max(ks, self.wall_lawrow[:, 1].max())
+        K = np.full(ss.n, 4.0 * max(kn, 3.5 * ks))
+        if ss.n_bonds:
+            kb = np.maximum(ss.bond_kn, 3.5 * ss.bond_ks)
+            K += np.bincount(ss.bond_i, kb, ss.n) + np.bincount(ss.bond_j, kb, ss.n)
+        zeta = max(float(self.lawrow[5]), float(ss.bond_zeta.max()) if ss.n_bonds else 0.0)
+        # two bodies on one spring: omega^2 = 2 K / m; viscous damping shortens the stable step
+        om = np.sqrt(2.0 * K[free] / self.m[free])
+        return float((2.0 / om * (np.sqrt(1.0 + zeta * zeta) - zeta)).min())
+
+    def _chunk(self, nsteps):
+        ss = self.spheres
+        while True:
+            status, done = _sp.run_spheres(
+                nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.time,
+                self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
+                self.lawrow, self.wall_lawrow,
+                ss.bond_i, ss.bond_j, ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta,
+                self.bond_us, self.bond_intact, self.bond_fn, self.bond_break_time, self.bkey_tab, self.bkey_slot,
+                self.wvert, self.wfn, self.wfd, self.wfv_start, self.wfv, self.wface_start, self.waabb,
+                self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab, self.energy, self.acc,
+                self.stats)
+            if done:
+                self.dt_prev = self.dt
+            self.steps += done
+            self.time += done * self.dt
+            nsteps -= done
+            if status == _sp.NEED_CAPACITY:
+                old = (self.cur.copy(), self.c_n.copy(), self.c_key, self.c_us, self.c_fn, self.c_ij)
+                cap = self.c_key.shape[1]
+                self._alloc(max(2 * cap, int(1.5 * self.stats[4])))
+                self.cur[:], self.c_n[:] = old[0], old[1]
+                self.c_key[:, :cap], self.c_us[:, :cap], self.c_fn[:, :cap], self.c_ij[:, :cap] = old[2:]
+                continue
+            return status
+
+    def _record(self, res):
+        res.time.append(self.time)
+        if self.record_positions:
+            res.pos.append(self.x.copy())
+            res.vel.append(self.v.copy())
+        e = self.energy
+        total = float(e.sum())
+        res.energy.append(np.r_[e, total - self.E0 if self.E0 is not None else 0.0])
+        res.contacts.append(int(self.stats[0]))
+        res.wall_contacts.append(int(self.stats[1]))
+        res.bonds.append(int(self.bond_intact.sum()))
+
+    def run(self, duration, record_every=None, progress=None, chunk_seconds=1.0) -> SphereResults:
+        """Advance by `duration` seconds, recording every `record_every` seconds (default duration / 100).
+
+        Raises BlowUpError (with the results so far) on a non-finite state."""
+        nsteps = max(1, int(round(duration / self.dt)))
+        rec = max(1, int(round((record_every or duration / 100) / self.dt)))
+        res = SphereResults(dt=self.dt)
+        if self.E0 is None:
+            self._record(res)
+        t_wall = time.perf_counter()
+        last = t_wall
+        left = nsteps
+        while left > 0:
+            n = 1 if self.E0 is None else min(rec - (self.steps % rec), left)
+            status = self._chunk(n)
+            left -= n
+            if self.E0 is None:
+                self.E0 = float(self.energy.sum())
+                res.energy[0] = np.r_[self.energy, 0.0]
+                if left > 0 and self.steps % rec:
+                    continue
+            if status == _sp.BLOWUP or not np.all(np.isfinite(self.energy)):
+                raise BlowUpError(f"blow-up near t = {self.time:.6g} s (step {self.steps}): non-finite state; "
+                                  f"dt = {self.dt:.3g} s (critical {self.dt_crit:.3g} s)", res)
+            self._record(res)
+            now = time.perf_counter()
+            if progress and (now - last >= chunk_seconds or left == 0):
+                last = now
+                progress(f"t = {self.time:.4g} s  step {self.steps}  ({100.0 * (nsteps - left) / nsteps:5.1f} %)  "
+                         f"contacts {int(self.stats[0])}  wall {int(self.stats[1])}  bonds {int(self.stats[2])}")
+        res.wall_s = time.perf_counter() - t_wall
+        return res
+
+    def displacement(self):
+        return self.x - self.x0
+
+    def contacts(self):
+        """Current contacts: i (sphere, or -1 - wall), j (sphere), normal force, shear displacement."""
+        c = int(self.cur[0])
+        k = int(self.c_n[c])
+        return {"i": self.c_ij[c, :k, 0].copy(), "j": self.c_ij[c, :k, 1].copy(), "fn": self.c_fn[c, :k].copy(),
+                "shear": self.c_us[c, :k].copy()}
+
+
+__all__ = ["BondLaw", "SphereSet", "SphereSimulation", "SphereResults", "load_model"]
