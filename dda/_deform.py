@@ -13,11 +13,20 @@ Mass matrix M = rho int T^T T dV, exact for a polyhedron from its volume and sec
 the strain energy V/2 e^T C e with C the isotropic elastic matrix (E, nu) for engineering strains, so K has
 V C in its strain block. A point force f at x adds T(x)^T f to the generalized force.
 
-These matrices are built once per block (numpy); the time loop's use of them is not written yet.
+These matrices are built once per block (numpy). In the time loop (dda/_integrate.py, taken only for blocks with
+dof = 12) the rotation is not the small rotation of D: a block's state is its centroid, its exact orientation R
+(quaternion, as for rigid blocks) and its six strains e in the body frame, a point at undeformed body offset X
+being at x = x0 + R (I + E) X (E the symmetric strain tensor of e). This co-rotational (rotation-corrected) form
+keeps the strains free of any contribution of the rotation, however large it grows. Per step the body-frame
+rates (angular velocity, strain rates) are advanced by central difference with the exact 9 x 9 rotation-strain
+block of M (translation decouples: int x dV = 0), generalized forces from T^T f with f in the body frame, the
+elastic force -V C e and the rigid gyroscopic torque; the velocity-dependent terms of the strains (centrifugal
+stretching) are left out (first-order DDA neglects them too).
 """
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .polyhedra import mass_properties
 
@@ -70,4 +79,281 @@ def stiffness_matrix(volume, E, nu):
     return K
 
 
-__all__ = ["t_matrix", "elastic_matrix", "second_moments", "mass_matrix", "stiffness_matrix"]
+def block_matrices(vloc, faces, density, E, nu):
+    """(M9, M9^-1, V C) of a block in its body frame: the rotation-strain part of the mass matrix and its
+    inverse (the translation part is m I), and the strain stiffness V C."""
+    M = mass_matrix(vloc, faces, density)
+    vol = second_moments(vloc, faces)[0]
+    M9 = np.ascontiguousarray(M[3:, 3:])
+    return M9, np.linalg.inv(M9), vol * elastic_matrix(E, nu)
+
+
+def critical_omega2(vloc, faces, density, E, nu, k_contact):
+    """Largest omega^2 of a free block with a contact spring k_contact at its farthest vertex (all 12 DOF)."""
+    M = mass_matrix(vloc, faces, density)
+    vol, c, _ = second_moments(vloc, faces)
+    K = stiffness_matrix(vol, E, nu)
+    r = np.asarray(vloc, float) - c
+    v = r[int(np.argmax(np.einsum("ij,ij->i", r, r)))]
+    T = t_matrix(v)
+    K = K + k_contact * T.T @ T
+    L = np.linalg.cholesky(M)
+    Li = np.linalg.inv(L)
+    return float(np.linalg.eigvalsh(Li @ K @ Li.T).max())
+
+
+@njit(cache=True)
+def strain_tensor(e, Et):
+    """Symmetric 3 x 3 strain tensor of (ex, ey, ez, gyz, gzx, gxy)."""
+    Et[0, 0] = e[0]
+    Et[1, 1] = e[1]
+    Et[2, 2] = e[2]
+    Et[1, 2] = Et[2, 1] = 0.5 * e[3]
+    Et[0, 2] = Et[2, 0] = 0.5 * e[4]
+    Et[0, 1] = Et[1, 0] = 0.5 * e[5]
+
+
+@njit(cache=True)
+def _inv3(A, out):
+    d = (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+         + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+    out[0, 0] = (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) / d
+    out[0, 1] = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) / d
+    out[0, 2] = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) / d
+    out[1, 0] = (A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]) / d
+    out[1, 1] = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) / d
+    out[1, 2] = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) / d
+    out[2, 0] = (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]) / d
+    out[2, 1] = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) / d
+    out[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / d
+
+
+@njit(cache=True)
+def deform_geometry(i, pos, R, strain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb):
+    """World vertices x = x0 + R (I + E) X, face planes (normal (I + E)^-1 n, turned by R) and box of block i."""
+    F = np.empty((3, 3))
+    Fi = np.empty((3, 3))
+    strain_tensor(strain[i], F)
+    for a in range(3):
+        F[a, a] += 1.0
+    _inv3(F, Fi)
+    G = np.empty((3, 3))  # R F
+    for a in range(3):
+        for b in range(3):
+            G[a, b] = R[a, 0] * F[0, b] + R[a, 1] * F[1, b] + R[a, 2] * F[2, b]
+    for a in range(3):
+        aabb[i, a] = 1e300
+        aabb[i, 3 + a] = -1e300
+    for v in range(vs[i], vs[i + 1]):
+        for a in range(3):
+            x = pos[i, a] + G[a, 0] * vloc[v, 0] + G[a, 1] * vloc[v, 1] + G[a, 2] * vloc[v, 2]
+            vert[v, a] = x
+            if x < aabb[i, a]:
+                aabb[i, a] = x
+            if x > aabb[i, 3 + a]:
+                aabb[i, 3 + a] = x
+    nb = np.empty(3)
+    for f in range(fs[i], fs[i + 1]):
+        # F^-T n = F^-1 n (F symmetric); n' . F X = n . X on the face, so d' = dloc / |F^-1 n|
+        ln = 0.0
+        for a in range(3):
+            nb[a] = Fi[a, 0] * nloc[f, 0] + Fi[a, 1] * nloc[f, 1] + Fi[a, 2] * nloc[f, 2]
+            ln += nb[a] * nb[a]
+        ln = np.sqrt(ln)
+        d = dloc[f] / ln
+        for a in range(3):
+            nn = (R[a, 0] * nb[0] + R[a, 1] * nb[1] + R[a, 2] * nb[2]) / ln
+            fnw[f, a] = nn
+            d += nn * pos[i, a]
+        fdw[f] = d
+
+
+@njit(cache=True)
+def body_point(i, p, pos, R, strain, X):
+    """Undeformed body offset X of the world point p of block i: X = (I + E)^-1 R^T (p - x0)."""
+    F = np.empty((3, 3))
+    Fi = np.empty((3, 3))
+    strain_tensor(strain[i], F)
+    for a in range(3):
+        F[a, a] += 1.0
+    _inv3(F, Fi)
+    y0 = p[0] - pos[i, 0]
+    y1 = p[1] - pos[i, 1]
+    y2 = p[2] - pos[i, 2]
+    b0 = R[0, 0] * y0 + R[1, 0] * y1 + R[2, 0] * y2
+    b1 = R[0, 1] * y0 + R[1, 1] * y1 + R[2, 1] * y2
+    b2 = R[0, 2] * y0 + R[1, 2] * y1 + R[2, 2] * y2
+    for a in range(3):
+        X[a] = Fi[a, 0] * b0 + Fi[a, 1] * b1 + Fi[a, 2] * b2
+
+
+@njit(cache=True)
+def point_velocity(i, p, pos, quat_R, strain, srate, wb, out):
+    """Velocity of the world point p of deformable block i relative to its centroid: w x (p - x0) + R Edot X."""
+    X = np.empty(3)
+    body_point(i, p, pos, quat_R, strain, X)
+    Ed = np.empty((3, 3))
+    strain_tensor(srate[i], Ed)
+    R = quat_R
+    w0 = R[0, 0] * wb[i, 0] + R[0, 1] * wb[i, 1] + R[0, 2] * wb[i, 2]
+    w1 = R[1, 0] * wb[i, 0] + R[1, 1] * wb[i, 1] + R[1, 2] * wb[i, 2]
+    w2 = R[2, 0] * wb[i, 0] + R[2, 1] * wb[i, 1] + R[2, 2] * wb[i, 2]
+    rx = p[0] - pos[i, 0]
+    ry = p[1] - pos[i, 1]
+    rz = p[2] - pos[i, 2]
+    u0 = Ed[0, 0] * X[0] + Ed[0, 1] * X[1] + Ed[0, 2] * X[2]
+    u1 = Ed[1, 0] * X[0] + Ed[1, 1] * X[1] + Ed[1, 2] * X[2]
+    u2 = Ed[2, 0] * X[0] + Ed[2, 1] * X[1] + Ed[2, 2] * X[2]
+    out[0] = w1 * rz - w2 * ry + R[0, 0] * u0 + R[0, 1] * u1 + R[0, 2] * u2
+    out[1] = w2 * rx - w0 * rz + R[1, 0] * u0 + R[1, 1] * u1 + R[1, 2] * u2
+    out[2] = w0 * ry - w1 * rx + R[2, 0] * u0 + R[2, 1] * u1 + R[2, 2] * u2
+
+
+@njit(cache=True)
+def add_strain_force(i, X, R, f, sign, qs):
+    """qs[i] += sign * T_strain(X)^T R^T f (the strain part of T^T f for a world force f at body offset X)."""
+    f0 = sign * (R[0, 0] * f[0] + R[1, 0] * f[1] + R[2, 0] * f[2])
+    f1 = sign * (R[0, 1] * f[0] + R[1, 1] * f[1] + R[2, 1] * f[2])
+    f2 = sign * (R[0, 2] * f[0] + R[1, 2] * f[1] + R[2, 2] * f[2])
+    qs[i, 0] += X[0] * f0
+    qs[i, 1] += X[1] * f1
+    qs[i, 2] += X[2] * f2
+    qs[i, 3] += 0.5 * (X[2] * f1 + X[1] * f2)
+    qs[i, 4] += 0.5 * (X[2] * f0 + X[0] * f2)
+    qs[i, 5] += 0.5 * (X[1] * f0 + X[0] * f1)
+
+
+@njit(cache=True)
+def _qmat(q, R):
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R[0, 0] = 1 - 2 * (y * y + z * z)
+    R[0, 1] = 2 * (x * y - w * z)
+    R[0, 2] = 2 * (x * z + w * y)
+    R[1, 0] = 2 * (x * y + w * z)
+    R[1, 1] = 1 - 2 * (x * x + z * z)
+    R[1, 2] = 2 * (y * z - w * x)
+    R[2, 0] = 2 * (x * z - w * y)
+    R[2, 1] = 2 * (y * z + w * x)
+    R[2, 2] = 1 - 2 * (x * x + y * y)
+
+
+@njit(cache=True)
+def deform_step(i, dt, dtavg, gravity, local_damp, pos, vel, quat, mass, inertia, force, torque, bforce,
+                pl_start, pl_r, pl_f, strain, srate, wb, qs, m9, m9inv, vc):
+    """Central-difference step of deformable block i (forces of this step in force / torque (world) and qs
+    (strain part of T^T f)). Returns (kinetic energy (product form), load potential, strain energy, local
+    damping work, blown)."""
+    R = np.empty((3, 3))
+    _qmat(quat[i], R)
+    F = np.empty((3, 3))
+    strain_tensor(strain[i], F)
+    for a in range(3):
+        F[a, a] += 1.0
+    es = 0.0
+    for a in range(6):
+        for b in range(6):
+            es += 0.5 * strain[i, a] * vc[i, a, b] * strain[i, b]
+    pe = 0.0
+    fp = np.empty(3)
+    for p in range(pl_start[i], pl_start[i + 1]):
+        X = pl_r[p]
+        y0 = F[0, 0] * X[0] + F[0, 1] * X[1] + F[0, 2] * X[2]
+        y1 = F[1, 0] * X[0] + F[1, 1] * X[1] + F[1, 2] * X[2]
+        y2 = F[2, 0] * X[0] + F[2, 1] * X[1] + F[2, 2] * X[2]
+        r0 = R[0, 0] * y0 + R[0, 1] * y1 + R[0, 2] * y2
+        r1 = R[1, 0] * y0 + R[1, 1] * y1 + R[1, 2] * y2
+        r2 = R[2, 0] * y0 + R[2, 1] * y1 + R[2, 2] * y2
+        for a in range(3):
+            fp[a] = pl_f[p, a]
+            force[i, a] += fp[a]
+        torque[i, 0] += r1 * fp[2] - r2 * fp[1]
+        torque[i, 1] += r2 * fp[0] - r0 * fp[2]
+        torque[i, 2] += r0 * fp[1] - r1 * fp[0]
+        add_strain_force(i, X, R, fp, 1.0, qs)
+        pe -= fp[0] * (pos[i, 0] + r0) + fp[1] * (pos[i, 1] + r1) + fp[2] * (pos[i, 2] + r2)
+    m = mass[i]
+    ke = 0.0
+    d_loc = 0.0
+    for a in range(3):
+        f = force[i, a] + m * gravity[a] + bforce[i, a]
+        if local_damp > 0.0 and vel[i, a] != 0.0:
+            fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
+            f -= fd
+            d_loc += fd * vel[i, a] * dtavg
+        vnew = vel[i, a] + dtavg * f / m
+        ke += 0.5 * m * vel[i, a] * vnew
+        vel[i, a] = vnew
+        pe -= (m * gravity[a] + bforce[i, a]) * pos[i, a]
+    # body-frame generalized force of the rotation and strain unknowns
+    Q = np.empty(9)
+    d0 = np.empty(9)
+    for a in range(3):
+        Q[a] = R[0, a] * torque[i, 0] + R[1, a] * torque[i, 1] + R[2, a] * torque[i, 2]
+        d0[a] = wb[i, a]
+    # rigid gyroscopic torque -w x (I w) (principal body frame)
+    I0 = inertia[i, 0] * wb[i, 0]
+    I1 = inertia[i, 1] * wb[i, 1]
+    I2 = inertia[i, 2] * wb[i, 2]
+    Q[0] -= wb[i, 1] * I2 - wb[i, 2] * I1
+    Q[1] -= wb[i, 2] * I0 - wb[i, 0] * I2
+    Q[2] -= wb[i, 0] * I1 - wb[i, 1] * I0
+    for a in range(6):
+        q = qs[i, a]
+        for b in range(6):
+            q -= vc[i, a, b] * strain[i, b]
+        Q[3 + a] = q
+        d0[3 + a] = srate[i, a]
+    if local_damp > 0.0:
+        for a in range(9):
+            if d0[a] != 0.0:
+                fd = local_damp * abs(Q[a]) * (1.0 if d0[a] > 0 else -1.0)
+                Q[a] -= fd
+                d_loc += fd * d0[a] * dtavg
+    d1 = np.empty(9)
+    for a in range(9):
+        acc = 0.0
+        for b in range(9):
+            acc += m9inv[i, a, b] * Q[b]
+        d1[a] = d0[a] + dtavg * acc
+    for a in range(9):
+        for b in range(9):
+            ke += 0.5 * d0[a] * m9[i, a, b] * d1[b]
+    # turn by the world angular velocity R w over dt (exact exponential of the quaternion)
+    w0 = R[0, 0] * d1[0] + R[0, 1] * d1[1] + R[0, 2] * d1[2]
+    w1 = R[1, 0] * d1[0] + R[1, 1] * d1[1] + R[1, 2] * d1[2]
+    w2 = R[2, 0] * d1[0] + R[2, 1] * d1[1] + R[2, 2] * d1[2]
+    wl = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    if wl > 0.0:
+        sn = np.sin(0.5 * wl * dt) / wl
+        c = np.cos(0.5 * wl * dt)
+    else:
+        sn = 0.5 * dt
+        c = 1.0
+    p0, p1, p2, p3 = c, sn * w0, sn * w1, sn * w2
+    q = quat[i]
+    o0 = p0 * q[0] - p1 * q[1] - p2 * q[2] - p3 * q[3]
+    o1 = p0 * q[1] + p1 * q[0] + p2 * q[3] - p3 * q[2]
+    o2 = p0 * q[2] - p1 * q[3] + p2 * q[0] + p3 * q[1]
+    o3 = p0 * q[3] + p1 * q[2] - p2 * q[1] + p3 * q[0]
+    ln = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2 + o3 * o3)
+    quat[i, 0] = o0 / ln
+    quat[i, 1] = o1 / ln
+    quat[i, 2] = o2 / ln
+    quat[i, 3] = o3 / ln
+    blown = False
+    for a in range(3):
+        wb[i, a] = d1[a]
+        pos[i, a] += dt * vel[i, a]
+        if not np.isfinite(pos[i, a]) or not np.isfinite(vel[i, a]) or not np.isfinite(d1[a]):
+            blown = True
+    for a in range(6):
+        srate[i, a] = d1[3 + a]
+        strain[i, a] += dt * d1[3 + a]
+        if not np.isfinite(strain[i, a]):
+            blown = True
+    return ke, pe, es, d_loc, blown
+
+
+__all__ = ["t_matrix", "elastic_matrix", "second_moments", "mass_matrix", "stiffness_matrix", "block_matrices",
+           "critical_omega2", "deform_geometry", "deform_step", "point_velocity", "body_point", "add_strain_force",
+           "strain_tensor"]

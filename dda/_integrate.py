@@ -26,6 +26,7 @@ from numba import njit
 
 from ._broad import build_grid, buckets_for, find_pairs, inside_cells, map_cells, n_cells
 from ._contact import point_force
+from ._deform import add_strain_force, body_point, deform_geometry, deform_step, point_velocity
 from ._fcp import MAXP, contact_points, fcp, gap_along, polygon_area, sat_search
 
 OK, NEED_CAPACITY, BLOWUP = 0, 1, 2
@@ -197,7 +198,8 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
               S, cellbox, large, mstart, mentries, fstart, fentries, large_list, stamp, tag, gap, margin,
               lawtab, keep_gap,
               cur, c_n_pair, c_key, c_a, c_b, c_nrm, c_np, c_pid, c_us, c_state, c_bond, c_pos, c_fn, c_depth,
-              htab, pa, pb, force, torque, energy, stats):
+              htab, pa, pb, force, torque, energy, stats,
+              dof12, strain, srate, wb, qs, m9, m9inv, vc):
     """Advance `nsteps` steps. energy = [KE, PE, elastic, fric, damp, local] (last three cumulative).
 
     stats = [steps done, status, pairs needed, fcp iterations, max depth, contacts, points, sliding points,
@@ -215,6 +217,10 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
     integrated nor searched for contacts (its contacts with other resting blocks are carried over unchanged, so
     shear history and elastic energy are kept); it wakes the step after a block that is not calm touches it.
     ``acc[1]`` holds the potential energy of the sleeping blocks (``pe_sl`` per block).
+    Deformable blocks (``dof12[i]``, see dda/_deform.py): body-frame ``strain`` / ``srate`` (strain rates) and
+    ``wb`` (angular velocity) replace ``angmom``; ``qs`` collects the strain part of T^T f, ``m9`` / ``m9inv`` /
+    ``vc`` are their rotation-strain mass matrix, its inverse and V C. They never sleep; their strain energy is
+    counted with the elastic energy ``energy[2]``.
     Returns (status, steps_done, mstart, mentries, pa, pb, large_list, active, fstart, fentries)."""
     nbody = pos.shape[0]
     nhe = he_origin.shape[0]
@@ -261,7 +267,11 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
         rebuild = False
         for k in range(active.shape[0]):
             i = active[k]
-            update_geometry(i, pos, quat, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb)
+            if dof12[i]:
+                quat_matrix(quat[i], R)
+                deform_geometry(i, pos, R, strain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb)
+            else:
+                update_geometry(i, pos, quat, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb)
             if not inside_cells(aabb, i, S, cellbox):
                 map_cells(aabb, i, S, margin, cellbox)
                 if n_cells(cellbox, i) > 64:
@@ -328,6 +338,9 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
             torque[i, 0] = 0.0
             torque[i, 1] = 0.0
             torque[i, 2] = 0.0
+            if dof12[i]:
+                for a in range(6):
+                    qs[i, a] = 0.0
         e_el = 0.0
         d_fric = 0.0
         d_damp = 0.0
@@ -483,7 +496,12 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                 # relative velocity of B with respect to A at the point (half-step velocities)
                 for a in range(3):
                     vrel[a] = vel[j, a] - vel[i, a]
-                if not static[j]:
+                if not static[j] and dof12[j]:
+                    quat_matrix(quat[j], R)
+                    point_velocity(j, p_pos[q], pos, R, strain, srate, wb, w_old)
+                    for a in range(3):
+                        vrel[a] += w_old[a]
+                elif not static[j]:
                     _omega(j, kin, static, wpres, quat, inertia, angmom, R, w_old)
                     rx = p_pos[q, 0] - pos[j, 0]
                     ry = p_pos[q, 1] - pos[j, 1]
@@ -491,7 +509,12 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                     vrel[0] += w_old[1] * rz - w_old[2] * ry
                     vrel[1] += w_old[2] * rx - w_old[0] * rz
                     vrel[2] += w_old[0] * ry - w_old[1] * rx
-                if not fixed[i]:
+                if dof12[i]:
+                    quat_matrix(quat[i], R)
+                    point_velocity(i, p_pos[q], pos, R, strain, srate, wb, w_old)
+                    for a in range(3):
+                        vrel[a] -= w_old[a]
+                elif not fixed[i]:
                     _omega(i, kin, static, wpres, quat, inertia, angmom, R, w_old)
                     rx = p_pos[q, 0] - pos[i, 0]
                     ry = p_pos[q, 1] - pos[i, 1]
@@ -527,6 +550,14 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                 torque[i, 0] -= ry * fpt[2] - rz * fpt[1]
                 torque[i, 1] -= rz * fpt[0] - rx * fpt[2]
                 torque[i, 2] -= rx * fpt[1] - ry * fpt[0]
+                if dof12[i]:
+                    quat_matrix(quat[i], R)
+                    body_point(i, p_pos[q], pos, R, strain, w_old)
+                    add_strain_force(i, w_old, R, fpt, -1.0, qs)
+                if dof12[j] and not static[j]:
+                    quat_matrix(quat[j], R)
+                    body_point(j, p_pos[q], pos, R, strain, w_old)
+                    add_strain_force(j, w_old, R, fpt, 1.0, qs)
                 c_pid[new, s, kept] = p_id[q]
                 c_us[new, s, kept, 0] = us[0]
                 c_us[new, s, kept, 1] = us[1]
@@ -602,6 +633,17 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
                     quat[i, a] = qh[a]
                 for a in range(3):
                     pos[i, a] += dt * vel[i, a]
+                continue
+            if dof12[i]:
+                ke_i, pe_i, es_i, dl_i, bl_i = deform_step(i, dt, dtavg, gravity, local_damp, pos, vel, quat, mass,
+                                                           inertia, force, torque, bforce, pl_start, pl_r, pl_f,
+                                                           strain, srate, wb, qs, m9, m9inv, vc)
+                ke += ke_i
+                pe += pe_i
+                e_el += es_i
+                d_loc += dl_i
+                if bl_i:
+                    blown = True
                 continue
             m = mass[i]
             quat_matrix(quat[i], R)

@@ -2,9 +2,11 @@
 
 ``series.npz`` keys: ``time`` (r,), ``pos`` (r, n, 3) centroids, ``quat`` (r, n, 4) orientations (w, x, y, z,
 body principal frame -> world), ``vel`` (r, n, 3), ``energy`` (r, 7) with columns ``ENERGY_COLUMNS``,
-``contacts`` / ``points`` / ``sliding`` (r,) counts, ``names`` (n,), ``fixed`` (n,), ``mass`` (n,).
+``contacts`` / ``points`` / ``sliding`` (r,) counts, ``names`` (n,), ``fixed`` (n,), ``mass`` (n,); with
+deformable blocks also ``strain`` (r, n, 6) body-frame strains (ex, ey, ez, gyz, gzx, gxy).
 ``series.csv``: one row per record with time, the energy columns, the counts, and the mean displacement of
-the moving blocks. ``final.npz``: the final state (pos, quat, vel, angmom, world vertices, contact points).
+the moving blocks. ``final.npz``: the final state (pos, quat, vel, angmom, world vertices, contact points;
+``strain`` (n, 6) and ``dof`` with deformable blocks).
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ class Results:
     wall_s: float = 0.0
     dt: float = 0.0
     steps: int = 0
+    strain: list = field(default_factory=list)  # only with deformable blocks
 
     @staticmethod
     def empty(sim):
@@ -50,6 +53,9 @@ class Results:
         self.points.append(int(sim.stats[6]))
         self.sliding.append(int(sim.stats[7]))
         self.steps = sim.steps
+        d12 = getattr(sim, "dof12", None)
+        if d12 is not None and d12.any():
+            self.strain.append(sim.strain_.copy())
 
     # arrays ----------------------------------------------------------
     @property
@@ -78,6 +84,7 @@ class Results:
             "contacts": np.asarray(self.contacts), "points": np.asarray(self.points),
             "sliding": np.asarray(self.sliding), "names": np.array(self.names), "fixed": self.fixed,
             "mass": self.mass, "dt": self.dt, "steps": self.steps, "wall_s": self.wall_s,
+            **({"strain": np.asarray(self.strain)} if self.strain else {}),
         }
 
     def save_npz(self, path):
@@ -109,5 +116,7 @@ def save_final(sim, path):
         tmp, time=sim.time, steps=sim.steps, pos=sim.pos, quat=sim.quat, vel=sim.vel, angmom=sim.angmom,
         vertices=verts, vert_start=A.vert_start, face_vert_start=A.face_vert_start, face_verts=A.face_verts,
         face_start=A.face_start, names=np.array(A.names), fixed=A.fixed,
-        **{f"contact_{k}": v for k, v in c.items()})
+        **{f"contact_{k}": v for k, v in c.items()},
+        **({"strain": sim.strain_, "dof": A.dof} if getattr(sim, "dof12", None) is not None and sim.dof12.any()
+           else {}))
     os.replace(tmp, path)

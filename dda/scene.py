@@ -16,7 +16,8 @@ written. Keys::
                    vertices + faces (0-based, counter-clockwise seen from outside); file = "mesh.stl" (convex);
                    and name, fixed, material, velocity, angular_velocity, prescribed = false (move at the
                    given velocity / angular velocity whatever the forces), force = [fx, fy, fz] (constant
-                   body load at the centroid, N)
+                   body load at the centroid, N), dof = 6 (rigid) or 12 (deformable: six constant strains,
+                   E and nu of its material; see dda/_deform.py)
     [[load]]       block = "name", force = [fx, fy, fz] (N, world), point = [x, y, z] (world, initial pose;
                    absent: the centroid): a constant point load
     [[generate]]   kind = one of dda.generate.GENERATORS, the other keys are its parameters
@@ -277,8 +278,10 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
             rd.err(src, spec.name or "(block)", str(exc))
         if spec.material not in materials and spec.material != "rock":
             rd.err(f"{src}.material", spec.material, f"no [[material]] named so (have: {', '.join(materials) or 'none'})")
-        if int(getattr(spec, "dof", 6)) != 6:
-            rd.err(f"{src}.dof", spec.dof, "only rigid blocks (dof = 6) are implemented")
+        if int(getattr(spec, "dof", 6)) not in (6, 12):
+            rd.err(f"{src}.dof", spec.dof, "must be 6 (rigid) or 12 (deformable)")
+        if int(getattr(spec, "dof", 6)) == 12 and getattr(spec, "prescribed", False):
+            rd.err(f"{src}.dof", spec.dof, "a deformable block (dof = 12) cannot be prescribed")
     for (m1, m2) in pair_laws:
         for m in (m1, m2):
             if m not in materials and m != "rock":
@@ -323,7 +326,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
 
 
 BLOCK_KEYS = {"name", "fixed", "material", "velocity", "angular_velocity", "prescribed", "force", "shape", "size", "center", "rotation_axis",
-              "rotation_angle", "width", "height", "sides", "vertices", "faces", "file"}
+              "rotation_angle", "width", "height", "sides", "vertices", "faces", "file", "dof"}
 
 
 def _read_block(rd, bt, key, scene_path):
@@ -339,6 +342,11 @@ def _read_block(rd, bt, key, scene_path):
         prescribed=rd.boolean(bt, "prescribed", f"{key}.prescribed", False),
         body_force=rd.vector(bt, "force", f"{key}.force", default=(0.0, 0.0, 0.0)),
     )
+    if "dof" in bt:
+        dof = rd.number(bt, "dof", f"{key}.dof")
+        if dof not in (6, 12):
+            rd.err(f"{key}.dof", bt["dof"], "must be 6 (rigid) or 12 (deformable: six constant strains)")
+        fields["dof"] = int(dof)
     forms = [f for f in ("shape", "vertices", "file") if f in bt]
     if len(forms) != 1:
         rd.err(key, sorted(bt), "give exactly one of: shape (+ size), vertices + faces, file")

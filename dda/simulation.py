@@ -32,6 +32,13 @@ contacts are all with fixed, sleeping or equally calm blocks, is no longer integ
 sleep_velocity = 1e-4 sqrt(g d50), sleep_accel = 1e-3 g (d50 the median block size; g = 9.81 without
 gravity). ``sim.active`` lists the awake moving blocks, ``sim.asleep`` flags the sleeping ones.
 
+Deformable blocks (``dof = 12`` in the BlockSpec, E and nu of the block's material): the state adds six
+body-frame strains (``sim.strain(i)``, engineering shear strains, the constant strain of DDA's first-order
+displacement function) in a co-rotational form, x = x0 + R (I + E) X (see dda/_deform.py), so a large rotation
+gives no strain; contact and load forces enter through T^T f and the strain energy V/2 e.C e counts with the
+elastic energy. ``sim.set_strain(i, e)`` imposes an initial strain, ``sim.volume(i)`` is the deformed volume.
+The time step then also resolves the fastest strain mode. Deformable blocks never sleep.
+
 Time step: ``dt=None`` takes ``safety * 2 / omega_max`` with omega_max from the stiffest contact (NPOINT
 points of the largest kn in parallel: a block held between two faces) on the smallest moving mass, and for rotation from the same springs at
 the largest vertex radius on the smallest principal moment of inertia.
@@ -48,6 +55,16 @@ from . import _integrate as _it
 from ._broad import LARGE, build_grid, buckets_for, map_cells, n_cells
 from ._fcp import MAXP
 from .results import Results
+
+def _quat_to_matrix(q):
+    from .system import quat_to_matrix
+
+    return quat_to_matrix(q)
+
+
+def _strain_tensor(e):
+    return np.array([[e[0], e[5] / 2, e[4] / 2], [e[5] / 2, e[1], e[3] / 2], [e[4] / 2, e[3] / 2, e[2]]])
+
 
 NPOINT = 8  # contact points assumed in parallel on one block (a block held between two faces) for the critical step
 
@@ -111,6 +128,16 @@ class Simulation:
         self.quat = A.quat.copy()
         self.vel = A.vel.copy()
         self.angmom = A.angmom.copy()
+        # deformable blocks: body-frame angular velocity, strains and strain rates (see dda/_deform.py)
+        self.dof12 = (A.dof == 12) & ~A.fixed
+        self.strain_ = np.zeros((nb, 6))
+        self.srate = np.zeros((nb, 6))
+        self.wb = np.zeros((nb, 3))
+        self.qs = np.zeros((nb, 6))
+        for i in np.nonzero(self.dof12)[0]:
+            R = _quat_to_matrix(self.quat[i])
+            self.wb[i] = (R.T @ self.angmom[i]) / A.inertia[i]
+            self.angmom[i] = 0.0
         self.active = np.nonzero(~A.fixed)[0].astype(np.int64)
         self.movable = self.active.copy()
         self.free = np.nonzero(~A.fixed & ~A.kin)[0].astype(np.int64)
@@ -195,7 +222,15 @@ class Simulation:
         zr = zeta * np.sqrt(m * r * r / imin)
         dt_t = 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + zeta * zeta) - zeta)
         dt_r = 2.0 / np.sqrt(k * r * r / imin) * (np.sqrt(1.0 + zr * zr) - zr)
-        return float(min(dt_t.min(), dt_r.min()))
+        dt_c = float(min(dt_t.min(), dt_r.min()))
+        for i in np.nonzero(self.dof12)[0]:
+            # all 12 modes of the block with the contact springs at its farthest vertex
+            from ._deform import critical_omega2
+
+            b = self.system.block(int(i))
+            w = math.sqrt(critical_omega2(b.vloc, b.faces, b.density, b.E, b.nu, k))
+            dt_c = min(dt_c, 2.0 / w * (math.sqrt(1.0 + zeta * zeta) - zeta))
+        return dt_c
 
     def _alloc_contacts(self, cap):
         self.cur = np.zeros(1, np.int64)
@@ -244,7 +279,8 @@ class Simulation:
                 self.large_list, self.stamp, self.tag, self.gap, self.margin, self.lawtab, self.keep_gap,
                 self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np, self.c_pid,
                 self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth, self.htab,
-                self.pa, self.pb, self.force, self.torque, self.energy, self.stats)
+                self.pa, self.pb, self.force, self.torque, self.energy, self.stats,
+                self.dof12, self.strain_, self.srate, self.wb, self.qs, A.m9, A.m9inv, A.vc)
             if done:
                 self.first_step = False
                 self.dt_prev = self.dt
@@ -258,12 +294,14 @@ class Simulation:
             return status
 
     def _snapshot(self):
-        return (self.pos.copy(), self.quat.copy(), self.vel.copy(), self.angmom.copy(), self.time, self.steps)
+        return (self.pos.copy(), self.quat.copy(), self.vel.copy(), self.angmom.copy(), self.time, self.steps,
+                self.strain_.copy(), self.srate.copy(), self.wb.copy())
 
     def _restore(self, snap):
         # the state of the last good record (the sleep flags stay as they are: a blow-up ends the run)
         self.pos[:], self.quat[:], self.vel[:], self.angmom[:] = snap[0], snap[1], snap[2], snap[3]
         self.time, self.steps = snap[4], snap[5]
+        self.strain_[:], self.srate[:], self.wb[:] = snap[6], snap[7], snap[8]
 
     @property
     def n_asleep(self):
@@ -339,7 +377,28 @@ class Simulation:
         """World vertices of block i in the current state."""
         A = self.A
         R = self.rotation(i)
+        if self.dof12[i]:
+            R = R @ (np.eye(3) + _strain_tensor(self.strain_[i]))
         return self.pos[i] + A.vloc[A.vert_start[i]:A.vert_start[i + 1]] @ R.T
+
+    def strain(self, i):
+        """Body-frame strains (ex, ey, ez, gyz, gzx, gxy) of block i (zero for a rigid block)."""
+        return self.strain_[i].copy()
+
+    def set_strain(self, i, e):
+        """Impose the strains of deformable block i (e.g. an initial strain before the run)."""
+        if not self.dof12[i]:
+            raise ValueError(f"block {i} is not a free deformable block (dof = 12)")
+        self.strain_[i] = np.asarray(e, float).reshape(6)
+        from ._deform import deform_geometry
+
+        deform_geometry(int(i), self.pos, self.rotation(i), self.strain_, self.A.vert_start, self.A.face_start,
+                        self.A.vloc, self.A.nloc, self.A.dloc, self.vert, self.fnw, self.fdw, self.aabb)
+
+    def volume(self, i):
+        """Current volume of block i: V0 det(I + E) for a deformable block."""
+        v0 = float(self.A.volume[i])
+        return v0 * float(np.linalg.det(np.eye(3) + _strain_tensor(self.strain_[i]))) if self.dof12[i] else v0
 
     def contacts(self):
         """Current contact points: dict of arrays (a, b, position, normal, normal force, depth, state)."""

@@ -13,9 +13,10 @@ block move at its given velocity and angular velocity whatever the forces (a pus
 adds a constant world force at a block's centroid, ``add_point_load`` a constant world force at a point of the
 block (given in world coordinates of the initial pose, carried with the block).
 
-Blocks carry ``dof`` (6 rigid; 12 reserved for deformable DDA blocks): per-block arrays are indexed by block
-and the integrator dispatches on it, so deformable blocks and spheres can be added as further body kinds
-without changing the layout of the rigid ones.
+Blocks carry ``dof`` (6 rigid, 12 deformable: DDA's first-order displacement function, six constant strains
+besides the rigid motion; see dda/_deform.py). Per-block arrays are indexed by block and the integrator
+dispatches on it; deformable blocks add their body-frame matrices ``m9`` (rotation-strain mass matrix),
+``m9inv`` and ``vc`` (V C), zero for rigid blocks. A deformable block cannot be prescribed.
 """
 from __future__ import annotations
 
@@ -78,6 +79,7 @@ class _Block:
     dof: int
     prescribed: bool = False
     body_force: np.ndarray = None
+    mats: tuple = None  # deformable blocks: (M9, M9^-1, V C) in the body frame
 
 
 class BlockSystem:
@@ -112,8 +114,10 @@ class BlockSystem:
         if not density > 0:
             raise ValueError(f"density must be > 0 (got {density!r})")
         dof = int(getattr(spec, "dof", 6))
-        if dof != 6:
-            raise NotImplementedError("only rigid blocks (dof = 6) are implemented")
+        if dof not in (6, 12):
+            raise ValueError(f"dof must be 6 (rigid) or 12 (deformable) (got {dof!r})")
+        if dof == 12 and not (E > 0 and -1.0 < nu < 0.5):
+            raise ValueError(f"a deformable block needs E > 0 and -1 < nu < 0.5 (got E = {E!r}, nu = {nu!r})")
         moments, axes = np.linalg.eigh(mp.inertia)
         if np.linalg.det(axes) < 0:
             axes[:, 2] *= -1
@@ -135,6 +139,12 @@ class BlockSystem:
         )
         if blk.prescribed and blk.fixed:
             raise ValueError(f"block {name!r} cannot be both fixed and prescribed")
+        if blk.prescribed and dof == 12:
+            raise ValueError(f"block {name!r}: a deformable block (dof = 12) cannot be prescribed")
+        if dof == 12:
+            from ._deform import block_matrices
+
+            blk.mats = block_matrices(vloc, faces, density, E, nu)
         self._blocks.append(blk)
         self._arrays = None
         return len(self._blocks) - 1
@@ -212,6 +222,10 @@ class SystemArrays:
     pl_start: np.ndarray = None  # (n+1,) point loads of block i: rows pl_start[i]:pl_start[i+1]
     pl_r: np.ndarray = None  # (p,3) body-frame offset from the centroid
     pl_f: np.ndarray = None  # (p,3) world force
+    # deformable blocks (zero for rigid ones)
+    m9: np.ndarray = None  # (n,9,9) rotation-strain mass matrix (body frame)
+    m9inv: np.ndarray = None  # (n,9,9) its inverse
+    vc: np.ndarray = None  # (n,6,6) V C
 
     @staticmethod
     def build(blocks, materials, point_loads=()):
@@ -272,6 +286,12 @@ class SystemArrays:
         pl_r = np.array([point_loads[k][1] for k in order], float).reshape(-1, 3)
         pl_f = np.array([point_loads[k][2] for k in order], float).reshape(-1, 3)
         bforce = np.array([b.body_force for b in blocks], float).reshape(-1, 3)
+        m9 = np.zeros((n, 9, 9))
+        m9inv = np.zeros((n, 9, 9))
+        vc = np.zeros((n, 6, 6))
+        for i, b in enumerate(blocks):
+            if b.mats is not None:
+                m9[i], m9inv[i], vc[i] = b.mats
         return SystemArrays(
             names=[b.name for b in blocks],
             pos=cat(lambda b: b.pos, float, (3,)), quat=cat(lambda b: b.quat, float, (4,)), vel=vel,
@@ -288,6 +308,7 @@ class SystemArrays:
             face_he=face_he.astype(np.int64), edge_he=edge_he.astype(np.int64),
             face_vert_start=np.array(fv_start, np.int64), face_verts=np.array(fv, np.int64),
             kin=kin, wpres=wpres, bforce=bforce, pl_start=pl_start, pl_r=pl_r, pl_f=pl_f,
+            m9=m9, m9inv=m9inv, vc=vc,
         )
 
     @property
