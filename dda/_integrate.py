@@ -199,7 +199,7 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
               lawtab, keep_gap,
               cur, c_n_pair, c_key, c_a, c_b, c_nrm, c_np, c_pid, c_us, c_state, c_bond, c_pos, c_fn, c_depth,
               htab, pa, pb, force, torque, energy, stats,
-              dof12, strain, srate, wb, qs, m9, m9inv, vc):
+              dof12, strain, srate, wb, qs, m9, m9inv, vc, fext, text, qext):
     """Advance `nsteps` steps. energy = [KE, PE, elastic, fric, damp, local] (last three cumulative).
 
     stats = [steps done, status, pairs needed, fcp iterations, max depth, contacts, points, sliding points,
@@ -221,6 +221,9 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
     ``wb`` (angular velocity) replace ``angmom``; ``qs`` collects the strain part of T^T f, ``m9`` / ``m9inv`` /
     ``vc`` are their rotation-strain mass matrix, its inverse and V C. They never sleep; their strain energy is
     counted with the elastic energy ``energy[2]``.
+    External forces (the spheres' contact reactions, dda/_coupled.py): when ``fext`` has rows, block i starts
+    each step with the force ``fext[i]``, torque ``text[i]`` (world, about the centroid) and strain force
+    ``qext[i]`` instead of zero; empty arrays for block-only runs.
     Returns (status, steps_done, mstart, mentries, pa, pb, large_list, active, fstart, fentries)."""
     nbody = pos.shape[0]
     nhe = he_origin.shape[0]
@@ -341,6 +344,13 @@ def run_chunk(nsteps, dt, dt_prev, gravity, local_damp, first_step,
             if dof12[i]:
                 for a in range(6):
                     qs[i, a] = 0.0
+            if fext.shape[0] > 0:
+                for a in range(3):
+                    force[i, a] = fext[i, a]
+                    torque[i, a] = text[i, a]
+                if dof12[i]:
+                    for a in range(6):
+                        qs[i, a] = qext[i, a]
         e_el = 0.0
         d_fric = 0.0
         d_damp = 0.0

@@ -53,15 +53,41 @@ def _write_outputs(scene, sim, res, tmp, frames, summary, say):
     (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
 
 
+def _write_block_mesh(bsim, path):
+    """Final block surfaces (polygons) of a block Simulation as one VTU."""
+    import meshio
+
+    A = bsim.A
+    pts, polys, bid = [], [], []
+    nv = 0
+    for i in range(A.n):
+        v = bsim.vertices(i)
+        pts.append(v)
+        for f in range(A.face_start[i], A.face_start[i + 1]):
+            loop = A.face_verts[A.face_vert_start[f]:A.face_vert_start[f + 1]] - A.vert_start[i] + nv
+            for k in range(1, len(loop) - 1):  # fan triangles of the convex face
+                polys.append([loop[0], loop[k], loop[k + 1]])
+                bid.append(i)
+        nv += len(v)
+    meshio.write(str(path), meshio.Mesh(np.concatenate(pts), [("triangle", np.array(polys, np.int64))],
+                                        cell_data={"block": [np.array(bid, np.int32)]}))
+
+
+def _n_moving(scene):
+    return sum(not getattr(b, "fixed", False) for b in scene.blocks)
+
+
 def _run_spheres(scene, out, args, say, t0):
     """`dda run` of a scene with [spheres]: series.npz (positions, energies, intact bonds per record, the final
-    bond state), spheres.vtu (final state) and summary.json."""
+    bond state; block_pos / block_quat per record when blocks move), spheres.vtu (final state), blocks.vtu (final
+    block meshes, when blocks move) and summary.json."""
     from .simulation import BlowUpError
 
     ss, sim = scene.build_spheres()
     if say:
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
-            f"{len(scene.blocks)} walls, dt = {sim.dt:.3g} s (critical {sim.dt_crit:.3g} s)")
+            f"{len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
+            f"(critical {sim.dt_crit:.3g} s)")
     tmp = out.with_name(f".{out.name}.part{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
@@ -79,11 +105,14 @@ def _run_spheres(scene, out, args, say, t0):
                 sim.x, [("vertex", np.arange(ss.n).reshape(-1, 1))],
                 point_data={"radius": ss.radii, "fixed": ss.fixed.astype(np.int32),
                             "displacement": sim.displacement(), "velocity": sim.v}))
+            if sim.blocks is not None:
+                _write_block_mesh(sim.blocks, tmp / "blocks.vtu")
         e = res.energy[-1]
         summary = {
             "scene": scene.name, "scene_path": str(scene.path), "status": status, "message": message,
             "spheres": ss.n, "fixed": int(ss.fixed.sum()), "bonds": ss.n_bonds,
-            "bonds_intact": int(sim.bond_intact.sum()), "walls": len(scene.blocks), "dt": sim.dt,
+            "bonds_intact": int(sim.bond_intact.sum()), "walls": len(scene.blocks) - _n_moving(scene),
+            "moving_blocks": _n_moving(scene), "dt": sim.dt,
             "dt_critical": sim.dt_crit, "steps": sim.steps, "time": sim.time,
             "wall_s": round(time.perf_counter() - t0, 3),
             "energy_final": dict(zip(("kinetic", "potential", "elastic", "friction", "damping", "local_damping",

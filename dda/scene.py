@@ -24,8 +24,9 @@ written. Keys::
     [spheres]      model = "model.npz" (an sgim model, relative to the scene), density = 2600, fixed = ["z>2.6"]
                    (regions of fixed spheres), bond_young (Pa) = 1e9 or bond_kn / bond_ks (N/m), bond_shear_ratio
                    = 0.4, bond_tensile / bond_shear (Pa, default unbreakable), bond_damping, bond_radius_factor = 1;
-                   only the model's bonded pairs get bonds; [contact] is the sphere contact law; every block is a
-                   fixed wall (see dda/spheres.py)
+                   only the model's bonded pairs get bonds; [contact] is the sphere contact law (sphere-sphere,
+                   sphere-block and, with [[contact_pair]], block-block); blocks are fixed walls or moving
+                   blocks stepped in one loop with the spheres (see dda/spheres.py, dda/_coupled.py)
     [output]       formats = ["npz", "csv", "vtu", "png"]
     [render]       width = 1600, height = 1100
 """
@@ -89,9 +90,30 @@ class DDAScene:
         ss = load_model(sp["model"], density=sp["density"], bonds=sp["bonds"])
         for axis, sign, value in sp["fixed"]:
             ss.fixed |= sign * (ss.centers[:, axis] - value) > 0
-        sim = SphereSimulation(ss, self.law, walls=self.blocks, gravity=self.gravity, dt=self.dt, safety=self.safety,
-                               local_damping=self.local_damping)
+        walls = self.blocks
+        if not all(getattr(b, "fixed", False) for b in self.blocks):
+            walls = self.block_system()  # moving blocks: one coupled loop with the spheres
+        sim = SphereSimulation(ss, self.law, walls=walls, gravity=self.gravity, dt=self.dt, safety=self.safety,
+                               local_damping=self.local_damping, pair_laws=self.pair_laws)
         return ss, sim
+
+    def block_system(self):
+        """BlockSystem of the scene's blocks (materials, body and point loads)."""
+        from .system import BlockSystem
+
+        bs = BlockSystem()
+        for spec in self.blocks:
+            m = self.materials.get(spec.material) or Material(spec.material)
+            i = bs.add_block(spec, density=m.density, E=m.E, nu=m.nu)
+            f = getattr(spec, "body_force", None)
+            if f is not None and np.any(np.asarray(f) != 0):
+                bs.add_body_load(i, f)
+        for i, point, force in self.loads:
+            if point is None:
+                bs.add_body_load(i, force)
+            else:
+                bs.add_point_load(i, point, force)
+        return bs
 
     def build(self):
         """BlockSystem and Simulation of the scene."""
@@ -287,9 +309,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
             if m not in materials and m != "rock":
                 rd.err("contact_pair", m, "unknown material")
     if spheres:
-        for spec, src in zip(blocks, sources):
-            if not getattr(spec, "fixed", False):
-                rd.err(f"{src}.fixed", False, "with [spheres] every block must be fixed (a wall)")
+        pass  # blocks with spheres: fixed walls, or moving blocks stepped with the spheres (dda/_coupled.py)
     elif all(getattr(b, "fixed", False) for b in blocks):
         rd.err("block", len(blocks), "every block is fixed: nothing would move")
     for spec, src in zip(blocks, sources):

@@ -180,6 +180,10 @@ class Simulation:
         self._alloc_contacts(max(256, 4 * nb))
         self.force = np.zeros((nb, 3))
         self.torque = np.zeros((nb, 3))
+        # external force / torque / strain force per block at each step (spheres' reactions; empty: none)
+        self.fext = np.zeros((0, 3))
+        self.text = np.zeros((0, 3))
+        self.qext = np.zeros((0, 6))
         self.energy = np.zeros(6)
         self.stats = np.zeros(12)
         g0 = float(np.linalg.norm(self.gravity)) or 9.81
@@ -280,7 +284,8 @@ class Simulation:
                 self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np, self.c_pid,
                 self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth, self.htab,
                 self.pa, self.pb, self.force, self.torque, self.energy, self.stats,
-                self.dof12, self.strain_, self.srate, self.wb, self.qs, A.m9, A.m9inv, A.vc)
+                self.dof12, self.strain_, self.srate, self.wb, self.qs, A.m9, A.m9inv, A.vc,
+                self.fext, self.text, self.qext)
             if done:
                 self.first_step = False
                 self.dt_prev = self.dt

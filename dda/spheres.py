@@ -12,8 +12,21 @@ Usage::
 Bodies are spheres with 6 DOF (solid-sphere inertia 2/5 m r^2); ``fixed`` spheres never move, ``prescribed``
 ones move at their velocity / angular velocity whatever the forces; ``body_force`` adds a constant force.
 Walls are fixed convex polyhedra (BlockSpec-like: ``vertices``, ``faces``): a sphere touches a wall at the
-polyhedron's closest point (face, edge or vertex). Moving polyhedral blocks together with spheres are not
-supported here (use dda.simulation for blocks).
+polyhedron's closest point (face, edge or vertex).
+
+Spheres with moving blocks: pass a BlockSystem with free, prescribed or deformable blocks as ``walls``::
+
+    bs = BlockSystem(); bs.add_block(floor_spec); ib = bs.add_block(cube_spec)    # fixed and free blocks
+    sim = SphereSimulation(ss, law, walls=bs, wall_law=None, block_law=None, pair_laws=None)
+    sim.run(1.0); sim.blocks.pos[ib], sim.blocks.contacts(), sim.contacts()   # sim.blocks: a dda Simulation
+
+Both run in one numba loop (dda/_coupled.py): each step computes the sphere forces (sphere-block contacts at
+the polyhedron's closest point with ``wall_law``, default ``law``; the block takes the reaction at that point),
+then advances the blocks one step with the block engine's own kernel (block-block contacts with ``block_law``,
+default ``wall_law``, and ``pair_laws``), then the spheres. The time step is common: ``safety`` times the
+smallest of the spheres' critical step, the blocks' (dda.simulation) and the blocks' under NPOINT sphere-block
+springs. Energies (``total_energy()``, the records) are the sums of both; blocks do not sleep in such runs.
+``contacts()`` lists sphere-block contacts with i = -1 - block index.
 
 Contacts (sphere-sphere without an intact bond, sphere-wall) follow the block engine's law at one point
 (dda/_contact.py: kn, ks per contact, friction, damping; no cohesion). Bonds (only the pairs of the model's
@@ -151,6 +164,8 @@ class SphereResults:
     contacts: list = field(default_factory=list)
     wall_contacts: list = field(default_factory=list)
     bonds: list = field(default_factory=list)  # intact bonds at each record
+    block_pos: list = field(default_factory=list)   # block centroids at each record (runs with moving blocks)
+    block_quat: list = field(default_factory=list)  # block orientations (unit quaternions w, x, y, z)
     wall_s: float = 0.0
     dt: float = 0.0
 
@@ -163,13 +178,15 @@ class SphereResults:
 
     def save(self, path, sim):
         """series npz: time, pos (r, n, 3), vel, energy, contacts, wall_contacts, bonds; and the final bond state
-        (bond_i, bond_j, bond_intact, bond_break_time)."""
+        (bond_i, bond_j, bond_intact, bond_break_time); with moving blocks block_pos (r, nb, 3), block_quat."""
         np.savez_compressed(path, time=self.times, pos=np.asarray(self.pos), vel=np.asarray(self.vel),
                             energy=np.asarray(self.energy), energy_columns=np.array(ENERGY_COLUMNS),
                             contacts=np.asarray(self.contacts), wall_contacts=np.asarray(self.wall_contacts),
                             bonds=np.asarray(self.bonds), radii=sim.spheres.radii, fixed=sim.spheres.fixed,
                             bond_i=sim.spheres.bond_i, bond_j=sim.spheres.bond_j, bond_intact=sim.bond_intact,
-                            bond_break_time=sim.bond_break_time)
+                            bond_break_time=sim.bond_break_time,
+                            **({"block_pos": np.asarray(self.block_pos), "block_quat": np.asarray(self.block_quat)}
+                               if self.block_pos else {}))
 
 
 def _wall_arrays(walls):
@@ -201,12 +218,14 @@ def _wall_arrays(walls):
 class SphereSimulation:
     """Explicit run of a SphereSet (and fixed polyhedral walls): the sphere counterpart of dda.Simulation.
 
-    `walls`: BlockSpecs (or a BlockSystem whose blocks are all fixed), `wall_law`: their ContactLaw (default
-    `law`). dt None: `safety` times the critical step (2 / omega for the stiffest sphere: its bonds plus four
+    `walls`: BlockSpecs (fixed walls), or a BlockSystem (all fixed: walls; some moving: blocks stepped with
+    the spheres, see the module docstring), `wall_law`: the sphere-block ContactLaw (default `law`),
+    `block_law` / `pair_laws`: the block-block laws of a moving BlockSystem. dt None: `safety` times the critical step (2 / omega for the stiffest sphere: its bonds plus four
     contacts, shear springs counted with the rotational factor 1 + 1 / (2/5))."""
 
     def __init__(self, spheres: SphereSet, law: ContactLaw | None = None, walls=None, wall_law=None,
-                 gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5, local_damping=0.0, record_positions=True):
+                 gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5, local_damping=0.0, record_positions=True,
+                 block_law=None, pair_laws=None):
         self.spheres = ss = spheres
         self.law = law or ContactLaw()
         self.gravity = np.asarray(gravity, float).reshape(3)
@@ -214,10 +233,12 @@ class SphereSimulation:
         self.record_positions = bool(record_positions)
         if ss.n_bonds and not np.all(np.isfinite(ss.bond_kn)):
             raise ValueError("bond stiffness must be finite")
+        self.blocks = None
+        if hasattr(walls, "arrays") and not np.all(walls.arrays().fixed):
+            self._init_coupled(walls, wall_law, block_law, pair_laws, dt, safety)
+            return
         if hasattr(walls, "arrays"):
             A = walls.arrays()
-            if not np.all(A.fixed):
-                raise NotImplementedError("spheres run with fixed polyhedral walls only")
             from .blockspec import BlockSpec
             from .system import quat_to_matrix
 
@@ -234,6 +255,18 @@ class SphereSimulation:
         wrow = np.array((wall_law or self.law).row(), float)
         self.lawrow = row
         self.wall_lawrow = np.ascontiguousarray(np.tile(wrow, (len(walls), 1)).reshape(-1, 6))
+        self._init_sphere_state()
+        self.dt_crit = self.critical_dt()
+        self.dt = float(dt) if dt is not None else float(safety) * self.dt_crit
+        if not self.dt > 0:
+            raise ValueError(f"time step must be > 0 (got {dt!r})")
+        self.dt_prev = 0.0
+        self.time = 0.0
+        self.steps = 0
+        self.E0 = None
+
+    def _init_sphere_state(self):
+        ss = self.spheres
         n = ss.n
         self.x = ss.centers.copy()
         self.x0 = ss.centers.copy()
@@ -253,14 +286,113 @@ class SphereSimulation:
         self.energy = np.zeros(6)
         self.acc = np.zeros(1)
         self.stats = np.zeros(5)
-        self.dt_crit = self.critical_dt()
+
+    def _init_coupled(self, system, wall_law, block_law, pair_laws, dt, safety):
+        """Spheres with moving blocks: a block Simulation stepped inside the coupled loop (dda/_coupled.py)."""
+        from .simulation import NPOINT, Simulation
+
+        ss = self.spheres
+        self.lawrow = np.array(self.law.row(), float)
+        wl = wall_law or self.law
+        self.blocks = bsim = Simulation(system, block_law or wl, gravity=self.gravity, dt=1.0,
+                                        local_damping=self.local_damping, pair_laws=pair_laws)
+        A = bsim.A
+        nb = A.n
+        self.wall_lawrow = np.ascontiguousarray(np.tile(np.array(wl.row(), float), (nb, 1)))
+        self.wvert = np.zeros((0, 3))  # walls are blocks of the block system here
+        self.waabb = np.zeros((0, 6))
+        self._init_sphere_state()
+        bsim.fext = np.zeros((nb, 3))
+        bsim.text = np.zeros((nb, 3))
+        bsim.qext = np.zeros((nb, 6))
+        self.bstamp = np.full(nb, -1, np.int64)
+        self.btag = np.zeros(1, np.int64)
+        self.sforce = np.zeros((ss.n, 3))
+        self.storque = np.zeros((ss.n, 3))
+        self.sres = np.zeros(4)
+        self.resume = False
+        # common critical step: the spheres' (their springs with the sphere-block kn), the blocks' (their own
+        # law), and the blocks under NPOINT sphere-block springs
+        dts = self.critical_dt()
+        dtb = bsim.dt_crit
+        free = bsim.free
+        if len(free):
+            k = NPOINT * float(self.wall_lawrow[:, 0].max())
+            m = A.mass[free]
+            imin = A.inertia[free].min(1)
+            rr = A.radius[free]
+            z = float(self.wall_lawrow[:, 5].max())
+            dtb = min(dtb, float((2.0 / np.sqrt(k / m) * (np.sqrt(1 + z * z) - z)).min()),
+                      float((2.0 / np.sqrt(k * rr * rr / imin)).min()))
+        self.dt_crit = min(dts, dtb)
         self.dt = float(dt) if dt is not None else float(safety) * self.dt_crit
         if not self.dt > 0:
             raise ValueError(f"time step must be > 0 (got {dt!r})")
+        bsim.dt = self.dt
         self.dt_prev = 0.0
         self.time = 0.0
         self.steps = 0
         self.E0 = None
+
+    def _chunk_coupled(self, nsteps):
+        from . import _coupled as _cp
+
+        ss = self.spheres
+        b = self.blocks
+        A = b.A
+        while True:
+            (status, done, fit, b.mstart, b.mentries, b.pa, b.pb, b.large_list, b.active, b.fstart,
+             b.fentries) = _cp.run_coupled(
+                nsteps, self.resume, self.dt, self.dt_prev, self.time, self.gravity, self.local_damping,
+                b.first_step,
+                self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
+                self.lawrow, self.wall_lawrow,
+                ss.bond_i, ss.bond_j, ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta,
+                self.bond_us, self.bond_intact, self.bond_fn, self.bond_break_time, self.bkey_tab, self.bkey_slot,
+                self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab, self.sforce,
+                self.storque, self.acc, self.energy, self.sres, self.stats,
+                A.face_vert_start, A.face_verts, self.bstamp, self.btag,
+                b.pos, b.vel, b.quat, b.angmom, A.mass, A.inertia, A.fixed, A.material, b.active,
+                b.movable, A.kin, A.wpres, A.bforce, A.pl_start, A.pl_r, A.pl_f, b.asleep, b.calm,
+                b.pe_sl, b.sleep_par, b.acc,
+                A.vert_start, A.face_start, A.edge_start, A.vloc, A.nloc, A.dloc, b.vert, b.fnw, b.fdw,
+                b.aabb, b.size_b, A.he_origin, A.he_next, A.he_pair, A.he_face, A.vert_he, A.edge_he,
+                b.S, b.cellbox, b.large, b.mstart, b.mentries, b.fstart, b.fentries,
+                b.large_list, b.stamp, b.tag, b.gap, b.margin, b.lawtab, b.keep_gap,
+                b.cur, b.c_n_pair, b.c_key, b.c_a, b.c_b, b.c_nrm, b.c_np, b.c_pid,
+                b.c_us, b.c_state, b.c_bond, b.c_pos, b.c_fn, b.c_depth, b.htab,
+                b.pa, b.pb, b.force, b.torque, b.energy, b.stats,
+                b.dof12, b.strain_, b.srate, b.wb, b.qs, A.m9, A.m9inv, A.vc, b.fext, b.text, b.qext)
+            self.resume = False
+            if done:
+                self.dt_prev = self.dt
+                b.dt_prev = self.dt
+                b.first_step = False
+            self.steps += done
+            self.time += done * self.dt
+            b.steps = self.steps
+            b.time = self.time
+            b.fcp_iterations += int(fit)
+            nsteps -= done
+            if status == _cp.NEED_BLOCK_CAPACITY:
+                b._grow_contacts(int(b.stats[2]))
+                self.resume = True  # this step's sphere forces are computed already
+                continue
+            if status == _cp.NEED_CAPACITY:
+                self._grow_sphere_contacts()
+                continue
+            return _sp.BLOWUP if status == _cp.BLOWUP else _sp.OK
+
+    def _grow_sphere_contacts(self):
+        old = (self.cur.copy(), self.c_n.copy(), self.c_key, self.c_us, self.c_fn, self.c_ij)
+        cap = self.c_key.shape[1]
+        self._alloc(max(2 * cap, int(1.5 * self.stats[4])))
+        self.cur[:], self.c_n[:] = old[0], old[1]
+        self.c_key[:, :cap], self.c_us[:, :cap], self.c_fn[:, :cap], self.c_ij[:, :cap] = old[2:]
+
+    def total_energy(self):
+        """Energy terms (kinetic, potential, elastic, friction, damping, local damping) of spheres and blocks."""
+        return self.energy + (self.blocks.energy if self.blocks is not None else 0.0)
 
     def _alloc(self, cap):
         self.cur = np.zeros(1, np.int64)
@@ -293,6 +425,8 @@ class SphereSimulation:
         return float((2.0 / om * (np.sqrt(1.0 + zeta * zeta) - zeta)).min())
 
     def _chunk(self, nsteps):
+        if self.blocks is not None:
+            return self._chunk_coupled(nsteps)
         ss = self.spheres
         while True:
             status, done = _sp.run_spheres(
@@ -323,8 +457,11 @@ class SphereSimulation:
         if self.record_positions:
             res.pos.append(self.x.copy())
             res.vel.append(self.v.copy())
-        e = self.energy
+        e = self.total_energy()
         total = float(e.sum())
+        if self.blocks is not None:
+            res.block_pos.append(self.blocks.pos.copy())
+            res.block_quat.append(self.blocks.quat.copy())
         res.energy.append(np.r_[e, total - self.E0 if self.E0 is not None else 0.0])
         res.contacts.append(int(self.stats[0]))
         res.wall_contacts.append(int(self.stats[1]))
@@ -347,11 +484,11 @@ class SphereSimulation:
             status = self._chunk(n)
             left -= n
             if self.E0 is None:
-                self.E0 = float(self.energy.sum())
-                res.energy[0] = np.r_[self.energy, 0.0]
+                self.E0 = float(self.total_energy().sum())
+                res.energy[0] = np.r_[self.total_energy(), 0.0]
                 if left > 0 and self.steps % rec:
                     continue
-            if status == _sp.BLOWUP or not np.all(np.isfinite(self.energy)):
+            if status == _sp.BLOWUP or not np.all(np.isfinite(self.total_energy())):
                 raise BlowUpError(f"blow-up near t = {self.time:.6g} s (step {self.steps}): non-finite state; "
                                   f"dt = {self.dt:.3g} s (critical {self.dt_crit:.3g} s)", res)
             self._record(res)
@@ -359,7 +496,8 @@ class SphereSimulation:
             if progress and (now - last >= chunk_seconds or left == 0):
                 last = now
                 progress(f"t = {self.time:.4g} s  step {self.steps}  ({100.0 * (nsteps - left) / nsteps:5.1f} %)  "
-                         f"contacts {int(self.stats[0])}  wall {int(self.stats[1])}  bonds {int(self.stats[2])}")
+                         f"contacts {int(self.stats[0])}  {'block' if self.blocks is not None else 'wall'} "
+                         f"{int(self.stats[1])}  bonds {int(self.stats[2])}")
         res.wall_s = time.perf_counter() - t_wall
         return res
 

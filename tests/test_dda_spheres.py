@@ -242,7 +242,7 @@ def test_sphere_scene_errors(tmp_path, capsys):
     cases = [('[spheres]\nmodel = "nope.npz"\n', "spheres.model"),
              ('[spheres]\nmodel = "model.npz"\nfixed = ["q>1"]\n', "spheres.fixed"),
              ('[spheres]\nmodel = "model.npz"\nbond_young = -1\n', "spheres.bond_young"),
-             ('[spheres]\nmodel = "model.npz"\n[[block]]\nshape = "cube"\nsize = 1.0\n', "block[0].fixed")]
+             ('[spheres]\nmodel = "model.npz"\n[[block]]\nshape = "cube"\nsize = 1.0\nfixed = true\nprescribed = true\n', "block[0].prescribed")]
     for k, (text, key) in enumerate(cases):
         (tmp_path / f"e{k}.toml").write_text(base + text)
         assert main(["run", str(tmp_path / f"e{k}.toml"), "-o", str(tmp_path / f"o{k}"), "--quiet"]) == 2
