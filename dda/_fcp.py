@@ -11,6 +11,16 @@ of B behind it along -n (the line through it is clipped against B); a vertex of 
 along n. The contact point is the middle of that overlap segment. A block resting on a face thus gets the corners
 of the clipped contact polygon (4 for a block on a larger face), an edge on a face its two clipped ends, an
 edge across an edge their crossing, a vertex on a face the vertex.
+
+A point in the crease where two blocks meet (a wedge's lower edge between its two joint blocks) has sunk into
+both, so it lies just outside each one's side face by its depth in the other. It gets one contact per block,
+with that block's facing plane and its depth below that plane (see ``clip_line``). Seen along n such a vertex
+lies beyond the edge of the facing face; the crossing of its edges with that edge is then not a corner of the
+contact polygon but the vertex's own contact, and is left out (``_crease_covered``). Counted as well, it
+doubled the crease's stiffness and, coming and going with small rocking, gave points without shear history
+that stayed locked and resisted sliding like viscous dampers (a prism in a V-groove crept instead of sliding).
+Candidates closer in the plane than twice the plane's overlap are one contact point (the deepest is kept, a
+vertex's id is preferred).
 """
 from __future__ import annotations
 
@@ -166,20 +176,32 @@ def fcp(vert, fnw, va0, va1, vb0, vb1, he_origin, he_next, he_pair, he_face, ver
 
 
 @njit(cache=True)
-def clip_line(P, n, fnw, fdw, f0, f1, tol, lat=0.0):
+def clip_line(P, n, fnw, fdw, f0, f1, tol, lat=0.0, sgn=-1.0):
     """Interval [lo, hi] of t for which P + t n lies in the convex block with faces f0..f1 (lo > hi: empty).
 
     A face (nearly) parallel to n only decides whether the line is inside (P on its plane counts as inside);
     this keeps points that lie on a side face of the other block (coplanar faces) from being cut by rounding.
-    With lat > 0, a side face (|n_f . n| < 0.1, within about 6 degrees of parallel to n) that P lies behind,
-    or in front of by at most lat, sets no bound: a vertex sitting in the crease between two blocks (a
-    wedge's edge in its groove) then counts against both, each by its facing plane."""
+
+    Face contacts (lat > 0): when the block has a reference face facing the contact (its outward normal within
+    about 8 degrees of ``sgn * n``: sgn = -1 for the block on the +n side, +1 for the block on the -n side), the
+    point is measured against that face's plane alone as long as it lies within ``lat`` of the block's other
+    faces. A vertex sitting in the crease where two blocks meet (a wedge's edge in its groove, a block's corner
+    at a joint between two others) has been pushed slightly across the neighbour's boundary by its penetration
+    into the neighbour; it still bears on each block by that block's facing plane."""
     lo = -1e300
     hi = 1e300
+    fref = -1
+    if lat > 0.0:
+        best = 0.99
+        for f in range(f0, f1):
+            nd = sgn * (fnw[f, 0] * n[0] + fnw[f, 1] * n[1] + fnw[f, 2] * n[2])
+            if nd > best:
+                best = nd
+                fref = f
     for f in range(f0, f1):
         nd = fnw[f, 0] * n[0] + fnw[f, 1] * n[1] + fnw[f, 2] * n[2]
         num = fdw[f] - (fnw[f, 0] * P[0] + fnw[f, 1] * P[1] + fnw[f, 2] * P[2])
-        if lat > 0.0 and abs(nd) < 0.1:
+        if fref >= 0 and f != fref:
             if num < -lat:
                 return 1.0, -1.0
             continue
@@ -194,6 +216,44 @@ def clip_line(P, n, fnw, fdw, f0, f1, tol, lat=0.0):
         elif num < -tol:
             return 1.0, -1.0
     return lo, hi
+
+
+@njit(cache=True)
+def _crease_covered(vert, fnw, fdw, p, x0, x1, n, f0, f1, tol, lat, sgn, overlap):
+    """True when vertex p of one block, seen along n, lies beyond the edge x0-x1 between the other block's facing
+    face and a side face, and is still a contact point (crease rule: it penetrates the facing face and lies
+    within lat of the other faces). The crossing of p's edges with that edge then lies between p and the facing
+    face: p is the contact polygon's corner there, and the crossing would count the crease twice."""
+    has_ref = False
+    for f in range(f0, f1):
+        if sgn * (fnw[f, 0] * n[0] + fnw[f, 1] * n[1] + fnw[f, 2] * n[2]) > 0.99:
+            has_ref = True
+            break
+    if not has_ref:
+        return False
+    on = 10.0 * tol
+    side = False
+    for f in range(f0, f1):
+        if sgn * (fnw[f, 0] * n[0] + fnw[f, 1] * n[1] + fnw[f, 2] * n[2]) > 0.99:
+            continue
+        if abs(_dot(fnw[f], x0) - fdw[f]) > on or abs(_dot(fnw[f], x1) - fdw[f]) > on:
+            continue
+        # f is the side face at the edge: p beyond the edge, seen along n (outward in-plane direction m)
+        sn = _dot(fnw[f], n)
+        m0 = fnw[f, 0] - sn * n[0]
+        m1 = fnw[f, 1] - sn * n[1]
+        m2 = fnw[f, 2] - sn * n[2]
+        if m0 * (p[0] - x0[0]) + m1 * (p[1] - x0[1]) + m2 * (p[2] - x0[2]) > 0.0:
+            side = True
+            break
+    if not side:
+        return False
+    lo, hi = clip_line(p, n, fnw, fdw, f0, f1, tol, lat, sgn)
+    if lo > hi:
+        return False
+    if sgn < 0.0:
+        return min(-lo, overlap) > 0.0 and hi >= -tol
+    return min(hi, overlap) > 0.0 and lo <= tol
 
 
 @njit(cache=True)
@@ -219,7 +279,8 @@ def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
     e2 = np.array([n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0]])
     lo_slab = sb - keep_gap - tol
     hi_slab = sa + keep_gap + tol
-    lat = max(sa - sb, 0.0) + tol  # lateral tolerance: the plane's overlap
+    lat = max(sa - sb, 0.0) + tol  # lateral tolerance (crease points, see clip_line)
+    merge = max(merge, 2.0 * lat)  # candidates closer than twice the overlap are one contact point
     maxp = out_depth.shape[0]
     cu = np.empty(maxp)
     cv = np.empty(maxp)
@@ -305,14 +366,14 @@ def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
             cid = -(1 + ha * nhe + hb)
         if c < na or c >= na + nb:
             # a point of A's surface: its penetration is B's extent behind it along -n
-            lo, hi = clip_line(P, n, fnw, fdw, fb0, fb1, tol, lat)
+            lo, hi = clip_line(P, n, fnw, fdw, fb0, fb1, tol, lat, -1.0)
             if hi < -tol or lo > hi:
                 continue
             depth = min(-lo, sa - sb)  # never deeper than the plane's overlap
             mid = -0.5 * depth
         else:
             # a vertex of B: A's extent beyond it along n
-            lo, hi = clip_line(P, n, fnw, fdw, fa0, fa1, tol, lat)
+            lo, hi = clip_line(P, n, fnw, fdw, fa0, fa1, tol, lat, 1.0)
             if lo > tol or lo > hi:
                 continue
             depth = min(hi, sa - sb)
@@ -321,6 +382,23 @@ def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
             continue
         if depth <= 0.0 and keep_gap <= 0.0:
             continue
+        if c >= na + nb:
+            # a crossing next to a vertex that bears by the crease rule is that vertex's contact
+            m = c - na - nb
+            ha = iscr[m // nB]
+            hb = iscr[nA + m - (m // nB) * nB]
+            ga = he_origin[ha]
+            gq = he_origin[he_next[ha]]
+            gb = he_origin[hb]
+            gr = he_origin[he_next[hb]]
+            if (_crease_covered(vert, fnw, fdw, vert[ga], vert[gb], vert[gr], n, fb0, fb1, tol, lat, -1.0, sa - sb)
+                    or _crease_covered(vert, fnw, fdw, vert[gq], vert[gb], vert[gr], n, fb0, fb1, tol, lat, -1.0,
+                                       sa - sb)
+                    or _crease_covered(vert, fnw, fdw, vert[gb], vert[ga], vert[gq], n, fa0, fa1, tol, lat, 1.0,
+                                       sa - sb)
+                    or _crease_covered(vert, fnw, fdw, vert[gr], vert[ga], vert[gq], n, fa0, fa1, tol, lat, 1.0,
+                                       sa - sb)):
+                continue
         u2 = _dot(P, e1)
         v2 = _dot(P, e2)
         dup = -1
@@ -328,12 +406,16 @@ def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
             if abs(cu[j] - u2) < merge and abs(cv[j] - v2) < merge:
                 dup = j
                 break
-        if dup >= 0:
-            if cid < out_id[dup] and cid > 0:
-                out_id[dup] = cid
-            continue
         slot = k
-        if k == maxp:
+        if dup >= 0:
+            if depth <= out_depth[dup] + 0.01 * lat:
+                if cid < out_id[dup] and cid > 0:
+                    out_id[dup] = cid
+                continue
+            slot = dup  # a clearly deeper candidate at the same place replaces the stored one
+        if dup >= 0:
+            pass
+        elif k == maxp:
             # full: replace the shallowest point if this one is deeper
             slot = 0
             for j in range(1, maxp):

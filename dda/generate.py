@@ -22,10 +22,14 @@ Fixed blocks have ``fixed=True``. Every random choice comes from ``numpy.random.
 ``brick_wall``         ``layers`` x ``per_layer`` bricks (``brick=(length, thickness, height)``) along y,
                        staggered by half a brick every other layer, on a fixed ground; a fixed ramp inclined
                        at ``ramp_angle`` ending ``gap`` before the wall at height ``hit_height`` (default
-                       0.3 x the wall height); a cube projectile of edge ``projectile`` resting on the ramp
+                       0.6 x the wall height, where the bricks above weigh little enough for the projectile
+                       to break through); a cube projectile of edge ``projectile`` resting on the ramp
                        ``run`` (slope length) above its lower end, with ``projectile_velocity`` along the ramp.
-                       ``layers=10, per_layer=13, brick=(0.4, 0.2, 0.2), ramp_angle=35.0, gap=0.5, run=2.0,
-                       projectile=0.4, projectile_velocity=0.0``. Blocks: ``ground``, ``ramp`` (fixed),
+                       ``layers=10, per_layer=13, brick=(0.4, 0.2, 0.2), ramp_angle=35.0, gap=0.1, run=2.0,
+                       projectile=0.6, projectile_velocity=0.0``. The gap is small against the projectile,
+                       which leaves the ramp with its front already at the wall (a gap about as wide as the
+                       tilted cube let it drop into the gap and wedge between the ramp's end and the wall's
+                       foot). Blocks: ``ground``, ``ramp`` (fixed),
                        ``brick_L_K`` (layer L, index K), ``projectile``.
 ``falling_polyhedra``  ``n`` blocks of the paper's four shapes (tetrahedron, pyramid, cube, octahedron; edge
                        ``size``), random shape and uniformly random orientation, on a grid of ``side`` x
@@ -119,8 +123,8 @@ def toppling(b=1.0, h=3.0, alpha=20.0, depth=None, base_length=None, base_thickn
             _tilted(col, alpha, name="column", material=material)]
 
 
-def brick_wall(layers=10, per_layer=13, brick=(0.4, 0.2, 0.2), ramp_angle=35.0, gap=0.5, run=2.0,
-               projectile=0.4, projectile_velocity=0.0, hit_height=None, material="rock",
+def brick_wall(layers=10, per_layer=13, brick=(0.4, 0.2, 0.2), ramp_angle=35.0, gap=0.1, run=2.0,
+               projectile=0.6, projectile_velocity=0.0, hit_height=None, material="rock",
                brick_material=None, projectile_material=None):
     """Staggered brick wall, fixed ground, fixed ramp and a projectile on the ramp (see module docstring)."""
     bl, bt, bh = (float(x) for x in brick)
@@ -129,7 +133,7 @@ def brick_wall(layers=10, per_layer=13, brick=(0.4, 0.2, 0.2), ramp_angle=35.0, 
             and gap >= 0 and run > 0 and projectile > 0 and (hit_height is None or hit_height > 0)):
         raise GeometryError("brick_wall: check layers, per_layer, brick sizes, ramp_angle in (0, 90), run, projectile")
     wall_h = layers * bh
-    zh = 0.3 * wall_h if hit_height is None else float(hit_height)
+    zh = 0.6 * wall_h if hit_height is None else float(hit_height)
     width = per_layer * bl + bl / 2
     # ramp: trapezoid in x-z (lower end at x = -gap, height zh; slope rises toward -x), extruded in y
     slope_len = run + 1.5 * projectile
@@ -141,7 +145,9 @@ def brick_wall(layers=10, per_layer=13, brick=(0.4, 0.2, 0.2), ramp_angle=35.0, 
     ramp_pts = [(x_s, ymid - yw, 0.0), (x_e, ymid - yw, 0.0), (x_e, ymid - yw, zh), (x_s, ymid - yw, z_s),
                 (x_s, ymid + yw, 0.0), (x_e, ymid + yw, 0.0), (x_e, ymid + yw, zh), (x_s, ymid + yw, z_s)]
     out = []
-    ground = box((x_s - 1.0, -width / 2 - 1.0, -0.5), (bt + max(1.0, wall_h), width / 2 + 1.0, 0.0))
+    # the ground reaches far enough behind the wall to catch the bricks thrown off by the impact
+    reach = max(1.0, 2.5 * wall_h)
+    ground = box((x_s - 1.0, -width / 2 - reach, -0.5), (bt + reach, width / 2 + reach, 0.0))
     out.append(BlockSpec(ground.vertices, ground.faces, name="ground", fixed=True, material=material))
     out.append(convex_hull(ramp_pts, name="ramp", fixed=True, material=material))
     y0 = -per_layer * bl / 2

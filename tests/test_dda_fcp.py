@@ -2,6 +2,7 @@
 quadratic programme (scipy), and the separating-axis overlap depth (all face normals and edge-pair cross
 products, brute force in numpy)."""
 import numpy as np
+import pytest
 from scipy.optimize import minimize
 from scipy.spatial import ConvexHull
 
@@ -198,3 +199,63 @@ def test_contact_points_of_a_shallow_overlap():
         assert 0.5 * -g <= np.max(dep[:k]) <= -g + 1e-12
         checked += 1
     assert checked + fallback + apart == 40 and fallback <= 6 and apart <= 2
+
+
+def _extrude(poly_yz, x0, x1):
+    """Convex prism along x over a convex (y, z) polygon, faces oriented outward by a centroid test."""
+    p = np.asarray(poly_yz, float)
+    m = len(p)
+    v = np.array([[x0, y, z] for y, z in p] + [[x1, y, z] for y, z in p])
+    c = v.mean(0)
+    faces = [list(range(m)), list(range(m, 2 * m))] + [[k, (k + 1) % m, m + (k + 1) % m, m + k] for k in range(m)]
+    out = []
+    for f in faces:
+        nrm = np.cross(v[f[1]] - v[f[0]], v[f[2]] - v[f[0]])
+        out.append(f if nrm @ (v[f[0]] - c) > 0 else f[::-1])
+    return BlockSpec(v, out)
+
+
+@pytest.mark.parametrize("alpha_deg,d1,d2", [(30.0, 1e-3, 1.5e-3), (45.0, 1.4e-3, 1e-3), (60.0, 1e-3, 1.6e-3),
+                                             (67.0, 1.2e-3, 1e-3)])
+def test_a_vertex_in_a_crease_bears_on_both_blocks(alpha_deg, d1, d2):
+    """A prism whose lower edge lies in the crease of a V-groove (two blocks meeting in the vertical plane y = 0),
+    sunk by d1 into wall 1 and d2 into wall 2. Its lower-edge vertices are then outside wall 1's side face by
+    (d2 - d1) / (2 sin alpha) (or wall 2's), yet against each wall the prism's face must bear with all four corners
+    at that wall's depth (analytical: the translation's component along the wall normal), each corner once."""
+    a = np.radians(alpha_deg)
+    t = np.tan(a)
+    n1 = np.array([0.0, np.sin(a), np.cos(a)])   # outward normal of wall 1 (y < 0)
+    n2 = np.array([0.0, -np.sin(a), np.cos(a)])  # wall 2 (y > 0)
+    # translation s with s.n1 = -d1, s.n2 = -d2
+    s = np.array([0.0, (d2 - d1) / (2 * np.sin(a)), -(d1 + d2) / (2 * np.cos(a))])
+    bs = BlockSystem()
+    w1 = bs.add_block(_extrude([(0, 0), (0, -2), (-2, -2), (-2, 2 * t)], -3, 5), fixed=True)
+    w2 = bs.add_block(_extrude([(0, 0), (2, 2 * t), (2, -2), (0, -2)], -3, 5), fixed=True)
+    H = 0.6
+    prism = _extrude([(0, 0), (H / t, H), (-H / t, H)], 0, 1.5)
+    pv = prism.vertices + s
+    i = bs.add_block(BlockSpec(pv, prism.faces))
+    sim = Simulation(bs, gravity=(0, 0, 0), dt=1e-3)
+    A = sim.A
+    vs, fs, es = A.vert_start, A.face_start, A.edge_start
+    for w, nw, d in ((w1, n1, d1), (w2, n2, d2)):
+        out = np.zeros(3)
+        g, ia, ib, sa, sb, it = fcp(sim.vert, sim.fnw, vs[i], vs[i + 1], vs[w], vs[w + 1], A.he_origin, A.he_next,
+                                    A.he_pair, A.he_face, A.vert_he, -nw, 1e-13, 100, out)
+        assert np.allclose(out, -nw, atol=1e-9) and g == pytest.approx(-d, rel=1e-6)
+        pos = np.zeros((MAXP, 3))
+        dep = np.zeros(MAXP)
+        ids = np.zeros(MAXP, np.int64)
+        k = contact_points(sim.vert, sim.fnw, sim.fdw, A.he_origin, A.he_next, A.edge_he,
+                           vs[i], vs[i + 1], fs[i], fs[i + 1], es[i], es[i + 1],
+                           vs[w], vs[w + 1], fs[w], fs[w + 1], es[w], es[w + 1],
+                           out, sa, sb, 0.0, 1.0, len(A.he_origin), pos, dep, ids)
+        assert k == 4  # the corners only: an edge crossing next to a crease corner is that corner's contact
+        assert np.allclose(dep[:k], d, rtol=1e-6)
+        # the corners of the prism's face on this wall (brute force: the prism's vertices at depth d below it)
+        corners = pv[np.abs(pv @ nw + d) < 1e-9]
+        assert len(corners) == 4
+        feats = pos[:k] + 0.5 * dep[:k, None] * out
+        assert np.allclose(feats @ nw, -d, atol=1e-12)  # every point on the prism's face
+        for c in corners:
+            assert np.sum(np.linalg.norm(feats - c, axis=1) < 1e-9) == 1
