@@ -53,37 +53,89 @@ def _write_outputs(scene, sim, res, tmp, frames, summary, say):
     (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
 
 
-def _write_block_mesh(bsim, path):
-    """Final block surfaces (polygons) of a block Simulation as one VTU."""
-    import meshio
-
-    A = bsim.A
-    pts, polys, bid = [], [], []
-    nv = 0
-    for i in range(A.n):
-        v = bsim.vertices(i)
-        pts.append(v)
-        for f in range(A.face_start[i], A.face_start[i + 1]):
-            loop = A.face_verts[A.face_vert_start[f]:A.face_vert_start[f + 1]] - A.vert_start[i] + nv
-            for k in range(1, len(loop) - 1):  # fan triangles of the convex face
-                polys.append([loop[0], loop[k], loop[k + 1]])
-                bid.append(i)
-        nv += len(v)
-    meshio.write(str(path), meshio.Mesh(np.concatenate(pts), [("triangle", np.array(polys, np.int64))],
-                                        cell_data={"block": [np.array(bid, np.int32)]}))
-
-
 def _n_moving(scene):
     return sum(not getattr(b, "fixed", False) for b in scene.blocks)
 
 
-def _run_spheres(scene, out, args, say, t0):
-    """`dda run` of a scene with [spheres]: series.npz (positions, energies, intact bonds per record, the final
-    bond state; block_pos / block_quat per record when blocks move), spheres.vtu (final state), blocks.vtu (final
-    block meshes, when blocks move) and summary.json."""
+def _run_frames(sim, scene, say, frame, append):
+    """Run `sim` for the scene's duration in `scene.frames` pieces, calling `frame()` before the first and after
+    each piece; `append(res, r)` merges a piece's results into the run's. Returns (results, status, message):
+    on a blow-up the results so far, "blow-up" and its message."""
     from .simulation import BlowUpError
 
+    frame()
+    piece = scene.duration / scene.frames
+    status, message, res = "ok", "", None
+    for _ in range(scene.frames):
+        try:
+            r = sim.run(piece, record_every=min(scene.record_every, piece), progress=say)
+        except BlowUpError as exc:
+            status, message, r = "blow-up", str(exc), exc.results
+        if res is None:
+            res = r
+        else:
+            append(res, r)
+        frame()
+        if status != "ok":
+            break
+    return res, status, message
+
+
+def _append_block_results(res, r):
+    # a later piece's first row repeats the previous piece's last state
+    for name in ("time", "pos", "quat", "vel", "energy", "contacts", "points", "sliding"):
+        getattr(res, name).extend(getattr(r, name)[1:])
+    res.wall_s += r.wall_s
+    res.steps = r.steps
+
+
+def _append_sphere_results(res, r):
+    # a later piece records no initial row (the energy reference is already set)
+    for name in ("time", "pos", "vel", "energy", "contacts", "wall_contacts", "bonds", "block_pos", "block_quat"):
+        getattr(res, name).extend(getattr(r, name))
+    res.wall_s += r.wall_s
+
+
+def _model_colour(model, n):
+    """The sgim colour of each sphere of a [spheres] model (None when the model has none)."""
+    colour = getattr(model, "colour", None)
+    if colour is None:
+        try:
+            with np.load(model) as z:
+                colour = z["colour"] if "colour" in z.files else None
+        except (OSError, ValueError, TypeError):
+            colour = None
+    return None if colour is None or len(colour) != n else np.asarray(colour)
+
+
+def _sphere_meshes(sim, colour):
+    """(spheres, blocks) pyvista meshes of the current state of a SphereSimulation (blocks None: no walls)."""
+    from .render import block_polydata, faces_polydata, sphere_polydata
+
+    ss = sim.spheres
+    spheres = sphere_polydata(sim.x, ss.radii, fixed=ss.fixed, velocity=sim.v, displacement=sim.displacement(),
+                              colour=colour)
+    if sim.blocks is not None:
+        blocks = block_polydata(sim.blocks)
+    elif len(sim.wface_start) > 1:
+        blocks = faces_polydata(sim.wvert, sim.wfv_start, sim.wfv, sim.wface_start,
+                                np.ones(len(sim.wface_start) - 1, bool))
+    else:
+        blocks = None
+    return spheres, blocks
+
+
+def _run_spheres(scene, out, args, say, t0):
+    """`dda run` of a scene with [spheres]: series.npz (positions, energies, intact bonds per record, the final
+    bond state; block_pos / block_quat per record when blocks move), series.csv, a VTU frame series
+    (frames/spheres_*.vtu: points with radius, fixed, velocity, displacement, colour; frames/blocks_*.vtu, or one
+    frames/walls.vtu when no block moves) indexed with their times in spheres.pvd (part 0 spheres, part 1
+    blocks), the final spheres.vtu / blocks.vtu, final.png and summary.json."""
+    from .render import render_meshes, save_mesh, write_pvd
+    from .results import save_sphere_csv
+
     ss, sim = scene.build_spheres()
+    colour = _model_colour(scene.spheres["model"], ss.n)
     if say:
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
             f"{len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
@@ -92,21 +144,45 @@ def _run_spheres(scene, out, args, say, t0):
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     try:
-        status, message = "ok", ""
-        try:
-            res = sim.run(scene.duration, record_every=scene.record_every, progress=say)
-        except BlowUpError as exc:
-            status, message, res = "blow-up", str(exc), exc.results
-        res.save(tmp / "series.npz", sim)
-        if "vtu" in scene.formats:
-            import meshio
+        want_vtu = "vtu" in scene.formats
+        entries = []
+        if want_vtu:
+            (tmp / "frames").mkdir()
 
-            meshio.write(str(tmp / "spheres.vtu"), meshio.Mesh(
-                sim.x, [("vertex", np.arange(ss.n).reshape(-1, 1))],
-                point_data={"radius": ss.radii, "fixed": ss.fixed.astype(np.int32),
-                            "displacement": sim.displacement(), "velocity": sim.v}))
-            if sim.blocks is not None:
-                _write_block_mesh(sim.blocks, tmp / "blocks.vtu")
+        def frame():
+            if not want_vtu:
+                return
+            k = len(entries) // 2
+            spheres, blocks = _sphere_meshes(sim, colour)
+            save_mesh(spheres, tmp / f"frames/spheres_{k:05d}.vtu")
+            entries.append((sim.time, f"frames/spheres_{k:05d}.vtu", 0))
+            if blocks is None:
+                name = None
+            elif sim.blocks is not None:
+                name = f"frames/blocks_{k:05d}.vtu"
+                save_mesh(blocks, tmp / name)
+            else:  # fixed walls do not move: one file for every time
+                name = "frames/walls.vtu"
+                if k == 0:
+                    save_mesh(blocks, tmp / name)
+            entries.append((sim.time, name, 1))
+
+        res, status, message = _run_frames(sim, scene, say, frame, _append_sphere_results)
+        res.save(tmp / "series.npz", sim)
+        if "csv" in scene.formats:
+            save_sphere_csv(res, tmp / "series.csv", ss.fixed,
+                            None if sim.blocks is None else sim.blocks.A.fixed)
+        spheres, blocks = _sphere_meshes(sim, colour)
+        if want_vtu:
+            write_pvd([e for e in entries if e[1] is not None], tmp / "spheres.pvd")
+            save_mesh(spheres, tmp / "spheres.vtu")
+            if blocks is not None:
+                save_mesh(blocks, tmp / "blocks.vtu")
+        if "png" in scene.formats:
+            render_meshes(tmp / "final.png", blocks=blocks, spheres=spheres, width=scene.width,
+                          height=scene.height, title=scene.name)
+            if say:
+                say(f"render     {tmp.name}/final.png")
         e = res.energy[-1]
         summary = {
             "scene": scene.name, "scene_path": str(scene.path), "status": status, "message": message,
@@ -140,7 +216,6 @@ def _run_spheres(scene, out, args, say, t0):
 
 def cmd_run(args):
     from .scene import load_scene
-    from .simulation import BlowUpError
 
     t0 = time.perf_counter()
     say = _progress(args.quiet)
@@ -170,28 +245,7 @@ def cmd_run(args):
                 write_vtu(sim, tmp / name)
                 frames.append((sim.time, name))
 
-        frame()
-        n_frames = scene.frames
-        piece = scene.duration / n_frames
-        status = "ok"
-        message = ""
-        res = None
-        for k in range(n_frames):
-            try:
-                r = sim.run(piece, record_every=min(scene.record_every, piece), progress=say)
-            except BlowUpError as exc:
-                status, message, r = "blow-up", str(exc), exc.results
-            if res is None:
-                res = r
-            else:
-                # append this piece's records (skip its first row: the previous piece's last state)
-                for name in ("time", "pos", "quat", "vel", "energy", "contacts", "points", "sliding"):
-                    getattr(res, name).extend(getattr(r, name)[1:])
-                res.wall_s += r.wall_s
-                res.steps = r.steps
-            frame()
-            if status != "ok":
-                break
+        res, status, message = _run_frames(sim, scene, say, frame, _append_block_results)
         summary = {
             "scene": scene.name, "scene_path": str(scene.path), "status": status, "message": message,
             "blocks": bs.n_blocks, "moving": int(len(sim.active)), "dt": sim.dt, "dt_critical": sim.dt_crit,

@@ -5,7 +5,7 @@ body principal frame -> world), ``vel`` (r, n, 3), ``energy`` (r, 7) with column
 ``contacts`` / ``points`` / ``sliding`` (r,) counts, ``names`` (n,), ``fixed`` (n,), ``mass`` (n,); with
 deformable blocks also ``strain`` (r, n, 6) body-frame strains (ex, ey, ez, gyz, gzx, gxy).
 ``series.csv``: one row per record with time, the energy columns, the counts, and the mean displacement of
-the moving blocks. ``final.npz``: the final state (pos, quat, vel, angmom, world vertices, contact points;
+the moving blocks (``save_sphere_csv``: the columns of a run with spheres). ``final.npz``: the final state (pos, quat, vel, angmom, world vertices, contact points;
 ``strain`` (n, 6) and ``dof`` with deformable blocks).
 """
 from __future__ import annotations
@@ -104,6 +104,36 @@ class Results:
                 w.writerow([repr(float(self.time[r])), *[repr(float(x)) for x in self.energy[r]],
                             self.contacts[r], self.points[r], self.sliding[r], repr(disp)])
         os.replace(tmp, path)
+
+
+def _mean_displacement(pos, moving):
+    """Mean distance of the moving bodies from their first recorded position, per record (r,)."""
+    if pos.ndim != 3 or not moving.any():
+        return np.zeros(len(pos))
+    return np.linalg.norm(pos[:, moving] - pos[:1, moving], axis=2).mean(axis=1)
+
+
+def save_sphere_csv(res, path, fixed, block_fixed=None):
+    """series.csv of a sphere run (a SphereResults): one row per record with time, the energy columns, the
+    sphere-sphere and sphere-wall/block contact counts, the intact bonds, the mean displacement of the free
+    spheres and (with moving blocks) of the moving blocks (`block_fixed`: the blocks' fixed flags)."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    n = len(res.time)
+    sdisp = _mean_displacement(np.asarray(res.pos), ~np.asarray(fixed, bool)) if res.pos else np.zeros(n)
+    bpos = np.asarray(res.block_pos)
+    with open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time", *ENERGY_COLUMNS, "contacts", "wall_contacts", "bonds", "mean_displacement",
+                    *(["mean_block_displacement"] if res.block_pos else [])])
+        bdisp = None
+        if res.block_pos:
+            moving = np.ones(bpos.shape[1], bool) if block_fixed is None else ~np.asarray(block_fixed, bool)
+            bdisp = _mean_displacement(bpos, moving)
+        for r in range(n):
+            w.writerow([repr(float(res.time[r])), *[repr(float(x)) for x in res.energy[r]], res.contacts[r],
+                        res.wall_contacts[r], res.bonds[r], repr(float(sdisp[r])),
+                        *([repr(float(bdisp[r]))] if bdisp is not None else [])])
+    os.replace(tmp, path)
 
 
 def save_final(sim, path):

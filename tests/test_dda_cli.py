@@ -123,3 +123,135 @@ formats = ["npz"]
     d = np.linalg.norm(s["pos"][-1, 1] - s["pos"][0, 1])
     # the generated block starts touching (no static overlap), which costs a little more than in the engine test
     assert d == pytest.approx(ref, rel=5e-3)
+
+
+# --- VTU frame series, .pvd index, CSV and PNG of block and sphere scenes ------------------------------------
+
+def _pvd(path):
+    """(time, file, part) of each DataSet of a ParaView collection, read with the standard XML parser."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(path).getroot()
+    return [(float(d.get("timestep")), d.get("file"), int(d.get("part"))) for d in root.iter("DataSet")]
+
+
+def _record_at(times, t):
+    k = int(np.argmin(np.abs(times - t)))
+    assert abs(times[k] - t) < 1e-8  # the .pvd holds 9 significant digits
+    return k
+
+
+def _box_centres(mesh):
+    """{block: mean of the vertices its cells use}; the blocks here are boxes, whose vertex mean is the centroid."""
+    used = {}
+    for c, bid in zip(mesh.cells, mesh.cell_data["block"]):
+        for row, b in zip(c.data, bid):
+            used.setdefault(int(b), set()).update(int(v) for v in np.ravel(row))
+    return {b: mesh.points[sorted(v)].mean(axis=0) for b, v in used.items()}
+
+
+def test_block_scene_pvd_lists_every_frame_and_frames_match_the_series(tmp_path):
+    import meshio
+
+    out = tmp_path / "out"
+    assert main(["run", str(_write(tmp_path, SCENE.replace("frames = 2", "frames = 4"))), "-o", str(out),
+                 "--quiet"]) == 0
+    s = np.load(out / "series.npz")
+    entries = _pvd(out / "blocks.pvd")
+    assert len(entries) == 5 and len(list((out / "frames").glob("*.vtu"))) == 5
+    t = [e[0] for e in entries]
+    assert t[0] == 0.0 and all(b > a for a, b in zip(t, t[1:])) and t[-1] == pytest.approx(s["time"][-1], abs=1e-8)
+    for time, name, _ in entries:
+        k = _record_at(s["time"], time)
+        centres = _box_centres(meshio.read(out / name))
+        for b in (0, 1):
+            assert centres[b] == pytest.approx(s["pos"][k, b], abs=1e-9)
+
+
+def _layer_model(tmp_path):
+    from sgim.build import build_model
+    from sgim.scene import scene_from_dict
+
+    d = {"name": "layer", "domain": {"min": [0, 0, 0], "max": [1, 1, 0.4]},
+         "packing": {"kind": "cubic", "radius": 0.1}, "bonds": {"rule": "colour"},
+         "discontinuity": [{"name": "j", "centre": [0.5, 0.5, 0.2], "dip": 0.0, "dip_direction": 0.0,
+                            "radius": 5.0, "thickness": 0.0}]}
+    model = build_model(scene_from_dict(d, "layer.toml"))
+    model.save(tmp_path / "model.npz")
+    return model
+
+
+SPHERE_SCENE = """
+name = "drop"
+[simulation]
+duration = 0.3
+record_every = 0.02
+frames = 3
+[contact]
+kn = 1e7
+friction = 30.0
+damping = 0.3
+[spheres]
+model = "model.npz"
+fixed = ["z<0.15"]
+[[block]]
+name = "floor"
+shape = "brick"
+size = 2.0
+width = 2.0
+height = 0.2
+center = [0.5, 0.5, -0.2]
+fixed = true
+[[block]]
+name = "cube"
+shape = "cube"
+size = 0.4
+center = [0.5, 0.5, 0.75]
+velocity = [0.3, 0.0, -1.0]
+"""
+
+
+@pytest.mark.parametrize("moving", [True, False])
+def test_sphere_scene_writes_a_frame_series_pvd_csv_and_png(tmp_path, moving):
+    import meshio
+
+    model = _layer_model(tmp_path)
+    text = SPHERE_SCENE if moving else SPHERE_SCENE[:SPHERE_SCENE.index("[[block]]\nname = \"cube\"")]
+    out = tmp_path / "out"
+    assert main(["run", str(_write(tmp_path, text)), "-o", str(out), "--quiet"]) == 0
+    for f in ("series.npz", "series.csv", "spheres.pvd", "spheres.vtu", "blocks.vtu", "final.png", "summary.json"):
+        assert (out / f).is_file(), f
+    assert (out / "final.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    s = np.load(out / "series.npz")
+    entries = _pvd(out / "spheres.pvd")
+    for part in (0, 1):
+        ts = [e[0] for e in entries if e[2] == part]
+        assert len(ts) == 4 and ts[0] == 0.0 and all(b > a for a, b in zip(ts, ts[1:]))
+        assert ts[-1] == pytest.approx(s["time"][-1], abs=1e-8) and ts[-1] == pytest.approx(0.3, rel=1e-3)
+    assert len(list((out / "frames").glob("spheres_*.vtu"))) == 4
+    n_moving = sum(1 for e in entries if e[2] == 1 and "blocks_" in e[1])
+    assert n_moving == (4 if moving else 0)
+    for time, name, part in entries:
+        assert (out / name).is_file()
+        k = _record_at(s["time"], time)
+        m = meshio.read(out / name)
+        if part == 0:
+            assert m.points == pytest.approx(s["pos"][k], abs=1e-12)
+            assert m.point_data["radius"] == pytest.approx(model.radii)
+            assert m.point_data["velocity"] == pytest.approx(s["vel"][k], abs=1e-12)
+            assert np.array_equal(m.point_data["colour"], model.colour)
+        else:
+            centres = _box_centres(m)
+            assert centres[0] == pytest.approx([0.5, 0.5, -0.2], abs=1e-12)  # the fixed floor
+            if moving:
+                assert centres[1] == pytest.approx(s["block_pos"][k, 1], abs=1e-9)
+    if moving:  # the cube moved: the frames are not all the same state
+        assert np.linalg.norm(s["block_pos"][-1, 1] - s["block_pos"][0, 1]) > 0.05
+    import csv
+
+    rows = list(csv.reader((out / "series.csv").open()))
+    assert rows[0][:2] == ["time", "kinetic"] and len(rows) == len(s["time"]) + 1
+    assert [float(r[0]) for r in rows[1:]] == pytest.approx(s["time"].tolist(), abs=1e-12)
+    free = s["pos"][:, ~s["fixed"]]
+    disp = np.array([np.mean([np.linalg.norm(p[i] - free[0][i]) for i in range(free.shape[1])]) for p in free])
+    assert [float(r[rows[0].index("mean_displacement")]) for r in rows[1:]] == pytest.approx(disp, abs=1e-12)
