@@ -21,7 +21,8 @@ written. Keys::
     [[load]]       block = "name", force = [fx, fy, fz] (N, world), point = [x, y, z] (world, initial pose;
                    absent: the centroid): a constant point load
     [[generate]]   kind = one of dda.generate.GENERATORS, the other keys are its parameters
-    [spheres]      model = "model.npz" (an sgim model, relative to the scene), density = 2600, fixed = ["z>2.6"]
+    [spheres]      model = "model.npz" (an sgim model) or "beam.toml" (an sgim scene, built in memory),
+                   relative to the scene; density = 2600, fixed = ["z>2.6"]
                    (regions of fixed spheres), bond_young (Pa) = 1e9 or bond_kn / bond_ks (N/m), bond_shear_ratio
                    = 0.4, bond_tensile / bond_shear (Pa, default unbreakable), bond_damping, bond_radius_factor = 1;
                    only the model's bonded pairs get bonds; [contact] is the sphere contact law (sphere-sphere,
@@ -138,7 +139,7 @@ class DDAScene:
 
 
 def _read_spheres(rd, data, path):
-    """[spheres] model = "model.npz" (sgim, relative to the scene), density, fixed = ["z>2.6"], bond_* keys."""
+    """[spheres] model = "model.npz" or an sgim scene "x.toml" (built in memory; relative to the scene), density, fixed = ["z>2.6"], bond_* keys."""
     if "spheres" not in data:
         return {}
     from sgim.scene import parse_cut
@@ -149,7 +150,7 @@ def _read_spheres(rd, data, path):
     rd.known(st, SPHERE_KEYS, "spheres")
     name = rd.string(st, "model", "spheres.model", "")
     if not name:
-        rd.err("spheres.model", name, "missing: the path of an sgim model.npz")
+        rd.err("spheres.model", name, "missing: the path of an sgim model.npz or scene .toml")
     mp = Path(name) if Path(name).is_absolute() else Path(path).parent / name
     if not mp.is_file():
         rd.err("spheres.model", name, f"no such file ({mp})")
@@ -173,12 +174,18 @@ def _read_spheres(rd, data, path):
         damping=rd.number(st, "bond_damping", "spheres.bond_damping", default=0.0, nonneg=True, hi=1.0),
         radius_factor=rd.number(st, "bond_radius_factor", "spheres.bond_radius_factor", default=1.0, positive=True),
     )
-    try:
-        from sgim.model import SphereModel
+    if mp.suffix.lower() == ".toml":  # an sgim scene: build its model in memory
+        from sgim.build import build_model
+        from sgim.scene import load_scene
 
-        model = SphereModel.load(mp)
-    except (OSError, ValueError, KeyError) as exc:
-        rd.err("spheres.model", name, f"cannot read the model ({str(exc).splitlines()[0]})")
+        model = build_model(load_scene(mp))  # a bad sgim scene raises its own one-line SceneError
+    else:
+        try:
+            from sgim.model import SphereModel
+
+            model = SphereModel.load(mp)
+        except (OSError, ValueError, KeyError) as exc:
+            rd.err("spheres.model", name, f"cannot read the model ({str(exc).splitlines()[0]})")
     density = rd.number(st, "density", "spheres.density", default=2600.0, positive=True)
     return {"model": model, "path": str(mp), "density": density, "bonds": law, "fixed": regions}
 

@@ -248,3 +248,26 @@ def test_sphere_scene_errors(tmp_path, capsys):
         assert main(["run", str(tmp_path / f"e{k}.toml"), "-o", str(tmp_path / f"o{k}"), "--quiet"]) == 2
         assert key in capsys.readouterr().err
         assert not (tmp_path / f"o{k}").exists()
+
+
+def test_spheres_model_may_be_an_sgim_scene_built_in_memory(tmp_path):
+    """[spheres] model = "beam.toml" gives the same spheres and bonds as the model.npz that sgim build writes."""
+    import subprocess
+    import sys
+
+    from dda.scene import load_scene
+
+    (tmp_path / "beam.toml").write_text(
+        'name = "beam"\n[domain]\nmin = [0, 0, 0]\nmax = [2, 1, 1]\n[packing]\nkind = "fcc"\nradius = 0.1\n'
+        '[[discontinuity]]\nname = "j"\ncentre = [1, 0.5, 0.5]\ndip = 90.0\ndip_direction = 90.0\nradius = 3.0\n')
+    subprocess.run([sys.executable, "-m", "sgim.cli", "build", str(tmp_path / "beam.toml"), "-o",
+                    str(tmp_path / "beam"), "--formats", "npz", "--quiet"], check=True)
+    runs = {}
+    for name, ref in (("npz", "beam/model.npz"), ("toml", "beam.toml")):
+        (tmp_path / f"{name}.toml").write_text(
+            f'name = "{name}"\n[simulation]\nduration = 0.01\n[contact]\nkn = 1e7\n'
+            f'[spheres]\nmodel = "{ref}"\n')
+        runs[name] = load_scene(tmp_path / f"{name}.toml").spheres["model"]
+    a, b = runs["npz"], runs["toml"]
+    assert np.array_equal(a.centers, b.centers) and np.array_equal(a.bonds, b.bonds)
+    assert np.array_equal(a.bonded, b.bonded) and not a.bonded.all()
