@@ -1,0 +1,83 @@
+"""Author cases/open_pit_dfn.toml: the open pit of cases/open_pit.toml in a Monte-Carlo joint network.
+
+Same box, packing, pit surface and fault F1 as cases/make_open_pit.py; the hand-written joints are
+replaced by three Fisher joint sets with truncated power-law radii and P32 targets (a few thousand
+fractures), sampled from [dfn] seed by sgim:
+
+* J1  steep joints  dip 75 / 040, kappa 30
+* J2  flat joints   dip 15 / 220, kappa 25
+* J3  cross joints  dip 80 / 310, kappa 20
+
+    python -m cases.make_open_pit_dfn      # rewrites cases/open_pit_dfn.toml
+    sgim dfn cases/open_pit_dfn.toml -o out/open_pit_dfn_network
+    sgim build cases/open_pit_dfn.toml -o out/open_pit_dfn
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from cases.make_open_pit import BOX, discontinuities, points
+
+SETS = (
+    # name, dip, dip direction, kappa, P32 (1/m)
+    ("J1", 75.0, 40.0, 30.0, 0.045),
+    ("J2", 15.0, 220.0, 25.0, 0.03),
+    ("J3", 80.0, 310.0, 20.0, 0.025),
+)
+RADIUS = {"law": "power", "exponent": 2.7, "min": 3.0, "max": 40.0}
+
+
+def toml_text():
+    lines = [
+        "# The open pit of cases/open_pit.toml in a Monte-Carlo joint network (written by cases/make_open_pit_dfn.py).",
+        "# Three Fisher joint sets (truncated power-law radii, P32 targets) replace the hand-written joints;",
+        "# the fault F1 (4 m, red) stays.  `sgim dfn` writes the network alone; `sgim build` applies it.",
+        'name = "open_pit_dfn"',
+        "",
+        "[domain]",
+        f"min = {list(BOX[0])}",
+        f"max = {list(BOX[1])}",
+        "",
+        "[packing]",
+        'kind = "cubic"',
+        "radius = 0.5",
+        "",
+        "[bonds]",
+        'rule = "colour"',
+        "",
+        "[output]",
+        'formats = ["npz", "vtu", "png"]',
+        "",
+        "[render]",
+        "hide_intact = false",
+        "translucent = false",
+        "cut_away = []",
+        "",
+        "[dfn]",
+        "seed = 2013",
+        "max_fractures = 200000",
+        "",
+    ]
+    for name, dip, dd, kappa, p32 in SETS:
+        lines += ["[[joint_set]]", f'name = "{name}"', f"dip = {dip}", f"dip_direction = {dd}", f"kappa = {kappa}",
+                  f"p32 = {p32}", "thickness = 0.0", "[joint_set.radius]",
+                  *(f'{k} = "{v}"' if isinstance(v, str) else f"{k} = {v}" for k, v in RADIUS.items()), ""]
+    for d in discontinuities():
+        if d["thickness"] > 0:
+            lines += ["[[discontinuity]]", f'name = "{d["name"]}"', f"centre = {d['centre']}", f"dip = {d['dip']}",
+                      f"dip_direction = {d['dip_direction']}", f"radius = {d['radius']}",
+                      f"thickness = {d['thickness']}", ""]
+    lines += ["[[excavation]]", 'name = "pit and terrain"', 'rule = "paper"', "points = ["]
+    lines += [f"  [{x:g}, {y:g}, {z:g}]," for x, y, z in points()]
+    lines += ["]", ""]
+    return "\n".join(lines)
+
+
+def main():
+    path = Path(__file__).with_name("open_pit_dfn.toml")
+    path.write_text(toml_text())
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
