@@ -43,6 +43,54 @@ def _cell_range(lo, hi, g0, cs, dims, a):
     return i0, i1
 
 
+@njit(cache=True)
+def _box_cells(M, ext, g0, cs, dims):
+    """Cell index ranges (lo3, hi3) of the box M +- ext."""
+    lo3 = np.empty(3, np.int64)
+    hi3 = np.empty(3, np.int64)
+    for ax in range(3):
+        lo3[ax], hi3[ax] = _cell_range(M[ax] - ext, M[ax] + ext, g0, cs, dims, ax)
+    return lo3, hi3
+
+
+@njit(cache=True)
+def _dominant_axis(S):
+    a = 0
+    if abs(S[1]) > abs(S[a]):
+        a = 1
+    if abs(S[2]) > abs(S[a]):
+        a = 2
+    return a
+
+
+@njit(cache=True)
+def _slab_cells(M, S, band, g0, cs, dims, a, b, e, ib, ie, lo_a, hi_a):
+    """Range (i0, i1) of cells along axis a (the normal's dominant axis), within [lo_a, hi_a], of the
+    column (ib, ie) on the other axes (b, e) whose cell boxes meet the slab |S.(x - M)| <= band |S|.
+
+    A disc's work then follows its area (times the slab's thickness in cells), not its bounding box.
+    The cell boxes are padded by a small margin so that a centre sorted into a cell by rounding is
+    never missed; the spheres found are tested exactly afterwards."""
+    ns = math.sqrt(S[0] * S[0] + S[1] * S[1] + S[2] * S[2])
+    scale = (abs(g0[0]) + abs(g0[1]) + abs(g0[2]) + abs(M[0]) + abs(M[1]) + abs(M[2])
+             + (dims[0] + dims[1] + dims[2]) * cs)
+    eps = 1e-6 * cs + 1e-12 * scale
+    tb0 = S[b] * (g0[b] + ib * cs - eps - M[b])
+    tb1 = S[b] * (g0[b] + (ib + 1) * cs + eps - M[b])
+    te0 = S[e] * (g0[e] + ie * cs - eps - M[e])
+    te1 = S[e] * (g0[e] + (ie + 1) * cs + eps - M[e])
+    tmin = min(tb0, tb1) + min(te0, te1)
+    tmax = max(tb0, tb1) + max(te0, te1)
+    w = (band + eps) * ns
+    u0 = (-w - tmax) / S[a]
+    u1 = (w - tmin) / S[a]
+    if u0 > u1:
+        u0, u1 = u1, u0
+    f0 = min(max((M[a] + u0 - eps - g0[a]) / cs, float(lo_a)), float(hi_a + 1))
+    f1 = min(max((M[a] + u1 + eps - g0[a]) / cs, float(lo_a - 1)), float(hi_a))
+    return int(math.floor(f0)), int(math.floor(f1))
+
+
 # ---------------------------------------------------------------------------
 # discontinuity membership (the paper's equations 13-16)
 
@@ -72,14 +120,19 @@ def _disc_test(c, rad, i, M, S, R, d):
 def _disc_pass(c, rad, start, order, g0, cs, dims, M, S, R, d, rmax, out_s, out_k, out_o, pos):
     band = d / 2.0 if d != 0.0 else 2.0 * rmax
     ext = R + band
-    x0, x1 = _cell_range(M[0] - ext, M[0] + ext, g0, cs, dims, 0)
-    y0, y1 = _cell_range(M[1] - ext, M[1] + ext, g0, cs, dims, 1)
-    z0, z1 = _cell_range(M[2] - ext, M[2] + ext, g0, cs, dims, 2)
+    lo3, hi3 = _box_cells(M, ext, g0, cs, dims)
+    a = _dominant_axis(S)
+    b, e = max((a + 1) % 3, (a + 2) % 3), min((a + 1) % 3, (a + 2) % 3)  # inner loop on the smaller stride
+    idx = np.empty(3, np.int64)
     n = 0
-    for iz in range(z0, z1 + 1):
-        for iy in range(y0, y1 + 1):
-            for ix in range(x0, x1 + 1):
-                cell = (iz * dims[1] + iy) * dims[0] + ix
+    for ib in range(lo3[b], hi3[b] + 1):
+        idx[b] = ib
+        for ie in range(lo3[e], hi3[e] + 1):
+            idx[e] = ie
+            i0, i1 = _slab_cells(M, S, band, g0, cs, dims, a, b, e, ib, ie, lo3[a], hi3[a])
+            for ia in range(i0, i1 + 1):
+                idx[a] = ia
+                cell = (idx[2] * dims[1] + idx[1]) * dims[0] + idx[0]
                 for q in range(start[cell], start[cell + 1]):
                     i = order[q]
                     k, off = _disc_test(c, rad, i, M, S, R, d)
@@ -242,13 +295,18 @@ def geometric_cuts(c, rad, start, order, g0, cs, dims, bond_start, bonds, colour
         A, B, C = S[0], S[1], S[2]
         ns = math.sqrt(A * A + B * B + C * C)
         ext = R + lmax
-        x0, x1 = _cell_range(M[0] - ext, M[0] + ext, g0, cs, dims, 0)
-        y0, y1 = _cell_range(M[1] - ext, M[1] + ext, g0, cs, dims, 1)
-        z0, z1 = _cell_range(M[2] - ext, M[2] + ext, g0, cs, dims, 2)
-        for iz in range(z0, z1 + 1):
-            for iy in range(y0, y1 + 1):
-                for ix in range(x0, x1 + 1):
-                    cell = (iz * dims[1] + iy) * dims[0] + ix
+        lo3, hi3 = _box_cells(M, ext, g0, cs, dims)
+        a = _dominant_axis(S)
+        ab, ae = max((a + 1) % 3, (a + 2) % 3), min((a + 1) % 3, (a + 2) % 3)
+        idx = np.empty(3, np.int64)
+        for ib in range(lo3[ab], hi3[ab] + 1):
+            idx[ab] = ib
+            for ie in range(lo3[ae], hi3[ae] + 1):
+                idx[ae] = ie
+                i0, i1 = _slab_cells(M, S, lmax, g0, cs, dims, a, ab, ae, ib, ie, lo3[a], hi3[a])
+                for ia in range(i0, i1 + 1):
+                    idx[a] = ia
+                    cell = (idx[2] * dims[1] + idx[1]) * dims[0] + idx[0]
                     for q in range(start[cell], start[cell + 1]):
                         i = order[q]
                         si = A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])

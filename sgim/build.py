@@ -7,10 +7,12 @@ import time
 import numpy as np
 
 from . import __version__
+from .cavities import carve
 from .cutting import Discs, SphereGrid, apply_bond_rule, colours, membership, touching_pairs
 from .excavate import FacetSet, kept_sites
 from .model import SphereModel
 from .packing import lattice_for
+from .surfdisc import membership_with_surfaces, surface_arrays, surface_geometric_cuts
 
 
 class Timer:
@@ -35,24 +37,39 @@ class Timer:
 def build_model(scene, progress=None, timer=None) -> SphereModel:
     """Build the bonded sphere model of a validated scene."""
     tm = timer or Timer(progress)
-    lat = lattice_for(scene)
-    facets = FacetSet(scene.excavations)
-    centres = kept_sites(lat, facets, scene.domain.min, scene.domain.max)
-    n = len(centres)
-    radii = np.full(n, lat.radius)
-    tm.lap("excavate", f"{n} of {lat.n_sites} lattice sites kept ({len(lat.families)} column families, "
-                       f"{facets.n} facets)")
+    if scene.packing.kind == "random":  # random dense packing of the kept region (sgim/rpack.py)
+        from .rpack import build_random
+
+        centres, radii, pack_meta, cavity_meta = build_random(scene, tm)
+        n = len(centres)
+    else:
+        lat = lattice_for(scene)
+        facets = FacetSet(scene.excavations)
+        centres = kept_sites(lat, facets, scene.domain.min, scene.domain.max)
+        centres, cavity_meta = carve(scene.cavities, centres, lat.radius)  # inner excavations
+        n = len(centres)
+        radii = np.full(n, lat.radius)
+        tm.lap("excavate", f"{n} of {lat.n_sites} lattice sites kept ({len(lat.families)} column families, "
+                           f"{facets.n} facets)")
+        pack_meta = {"kind": lat.kind, "radius": lat.radius, "lattice_sites": lat.n_sites,
+                     "coordination": lat.coordination}
 
     tol = scene.bonds.tolerance
-    grid = SphereGrid.build(centres, 2.0 * lat.radius * (1.0 + tol) * (1 + 1e-12))
-    discs = Discs.from_scene(scene.discontinuities)
+    rmax = float(radii.max()) if n else 1.0
+    grid = SphereGrid.build(centres, 2.0 * rmax * (1.0 + tol) * (1 + 1e-12))
+    discs, network = _with_network(scene, Discs.from_scene(scene.discontinuities), tm)
     mem = membership(centres, radii, grid, discs)
+    mem = membership_with_surfaces(mem, scene.surfaces, len(discs), centres, radii, grid)
     colour, source = colours(n, mem)
-    tm.lap("cut", f"{len(discs)} discontinuities, {len(mem.sphere)} memberships")
+    tm.lap("cut", f"{len(discs) + len(scene.surfaces)} discontinuities, {len(mem.sphere)} memberships")
 
     bonds, bond_start = touching_pairs(centres, radii, grid, tol)
     bonded, cut_by = apply_bond_rule(scene.bonds.rule, centres, radii, grid, bonds, bond_start, colour, source,
                                      mem, discs, tol)
+    if scene.bonds.rule == "geometric" and scene.surfaces:
+        cut_by = surface_geometric_cuts(cut_by, scene.surfaces, len(discs), centres, radii, grid, bonds, bond_start,
+                                        tol)
+        bonded = cut_by < 0
     tm.lap("bonds", f"{len(bonds)} touching pairs, {int(bonded.sum())} bonded ({scene.bonds.rule} rule)")
 
     meta = {
@@ -60,18 +77,41 @@ def build_model(scene, progress=None, timer=None) -> SphereModel:
         "scene": scene.name,
         "scene_path": str(scene.path),
         "domain": [scene.domain.min.tolist(), scene.domain.max.tolist()],
-        "packing": {"kind": lat.kind, "radius": lat.radius, "lattice_sites": lat.n_sites,
-                    "coordination": lat.coordination},
+        "packing": pack_meta,
         "excavation": [{"name": s.name, "rule": s.rule, "facets": int(len(s.faces))} for s in scene.excavations],
         "bonds": {"rule": scene.bonds.rule, "tolerance": tol},
     }
+    if network is not None:
+        meta["dfn"] = network.summary()
+    if cavity_meta:
+        meta["cavities"] = cavity_meta
+    if scene.surfaces:
+        meta["surfaces"] = [{"name": s.name, "index": len(discs) + k, "source": s.source, "thickness": s.thickness,
+                             "faces": int(s.mesh.n_faces), **s.params} for k, s in enumerate(scene.surfaces)]
     return SphereModel(
         centers=centres, radii=radii, colour=colour, colour_source=source,
         bonds=bonds, bonded=bonded, cut_by=cut_by,
         member_sphere=mem.sphere, member_disc=mem.disc, member_kind=mem.kind, member_offset=mem.offset,
         disc_centre=discs.centres, disc_normal=discs.normals, disc_radius=discs.radii,
         disc_thickness=discs.thickness, disc_name=discs.names, meta=meta, scene_toml=scene.text,
+        surfaces=surface_arrays(scene.surfaces, len(discs)) if scene.surfaces else {},
     )
+
+
+def _with_network(scene, discs, tm):
+    """Append the scene's fracture network (sampled from its joint sets or read from its file) to the
+    hand-written discs; the network is kept on the scene for the output files."""
+    if getattr(scene, "dfn", None) is None:
+        return discs, None
+    from .dfn import append_discs, network_for
+
+    t0 = time.perf_counter()
+    network = network_for(scene, progress=tm.progress)
+    tm.t["dfn"] = time.perf_counter() - t0
+    tm._last += tm.t["dfn"]  # the "cut" lap leaves the network's time out
+    if tm.progress:
+        tm.progress(f"{'dfn':<10s} {tm.t['dfn']:7.2f} s  {len(network)} fractures ({network.source})")
+    return append_discs(discs, network), network
 
 
 def summary(model: SphereModel, timings: dict) -> dict:

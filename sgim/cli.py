@@ -1,4 +1,4 @@
-"""Command line: ``sgim build | show | info``.
+"""Command line: ``sgim build | show | info | dfn``.
 
 Bad input prints one line naming the file, key and value, exits with status 2 and
 leaves no output behind (the output folder is assembled under a temporary name and
@@ -70,6 +70,11 @@ def cmd_build(args):
             render(model, tmp / "model.png", hide_intact=rs.hide_intact, translucent=rs.translucent,
                    cut_away=rs.cut_away, width=rs.width, height=rs.height, title=scene.name)
             timer.lap("render", str(out / "model.png"))
+        if getattr(scene, "dfn", None) is not None:
+            from .dfn import network_for, write_network
+
+            write_network(network_for(scene), tmp)
+            timer.lap("write dfn", str(out / "network.csv"))
         info = summary(model, timer.t)
         info["timings_s"]["total"] = round(time.perf_counter() - t0, 4)
         (tmp / "summary.json").write_text(json.dumps(info, indent=2))
@@ -91,6 +96,52 @@ def cmd_build(args):
               f"{c['blue']} blue), {c['bonds']} contacts ({c['bonded']} bonded, {c['cut']} cut) "
               f"in {info['timings_s']['total']:.2f} s")
     return 0
+
+
+def cmd_dfn(args):
+    from .dfn import format_statistics, network_for, write_network
+    from .scene import load_scene
+
+    t0 = time.perf_counter()
+    say = _progress(args.quiet)
+    scene = load_scene(args.scene)  # SceneError before anything is created
+    if scene.dfn is None:
+        raise CliError(f"{scene.path}: joint_set = None: the scene defines no fracture network "
+                       "(add [[joint_set]] tables or [dfn] file)")
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"{out}: output exists and is not a folder")
+    net = network_for(scene, progress=say)
+    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        write_network(net, tmp)
+        info = {"scene": scene.name, "scene_path": str(scene.path), **net.summary(),
+                "seconds": round(time.perf_counter() - t0, 4)}
+        (tmp / "summary.json").write_text(json.dumps(info, indent=2))
+        _replace_folder(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if args.json:
+        print(json.dumps(info, indent=2))
+    elif not args.quiet:
+        print(f"{out}: {len(net)} fractures, P32 {info['p32']:.4g} 1/m in the domain, {info['seconds']:.2f} s")
+        for line in format_statistics(net):
+            print("  " + line)
+    return 0
+
+
+def _replace_folder(tmp, out):
+    """Rename the finished folder ``tmp`` to ``out``, replacing an existing ``out``."""
+    if out.exists():
+        old = out.with_name(f".{out.name}.old{os.getpid()}")
+        os.replace(out, old)
+        os.replace(tmp, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, out)
 
 
 def _load_model(path):
@@ -135,13 +186,28 @@ def cmd_info(args):
     pk = m.get("packing", {})
     print(f"model      {args.model}")
     print(f"scene      {m.get('scene', '?')}  ({m.get('generator', '?')})")
-    print(f"packing    {pk.get('kind', '?')}  r = {pk.get('radius', '?')}  lattice sites {pk.get('lattice_sites', '?')}")
+    if pk.get("kind") == "random":  # sgim/rpack.py statistics
+        st = pk.get("statistics", {})
+        les = st.get("largest_empty_sphere") or {}
+        print(f"packing    random  r = {st.get('radius_min', '?')} .. {st.get('radius_max', '?')}  density "
+              f"{st.get('density', float('nan')):.4f}  coordination {st.get('coordination', float('nan')):.3f}  "
+              f"max overlap {st.get('max_overlap', float('nan')):.1e}  largest empty sphere "
+              f"{les.get('radius') or float('nan'):.4g} ({les.get('relative_max') or float('nan'):.3f} x local r)")
+    else:
+        print(f"packing    {pk.get('kind', '?')}  r = {pk.get('radius', '?')}  lattice sites {pk.get('lattice_sites', '?')}")
     print(f"spheres    {c['spheres']}  intact {c['intact']}  red {c['red']}  green {c['green']}  blue {c['blue']}")
     print(f"contacts   {c['bonds']}  bonded {c['bonded']}  cut {c['cut']}  (rule {m.get('bonds', {}).get('rule', '?')})")
     print(f"discs      {c['discontinuities']}  memberships {c['memberships']}")
     for k, name in enumerate(model.disc_name):
         kind = "fault" if model.disc_thickness[k] > 0 else "joint"
         print(f"  [{k}] {name} ({kind}, R = {model.disc_radius[k]:g}, d = {model.disc_thickness[k]:g})")
+    srf = model.surfaces
+    for q, k in enumerate(srf.get("surf_index", [])):
+        d = float(srf["surf_thickness"][q])
+        nf = int(srf["surf_face_start"][q + 1] - srf["surf_face_start"][q])
+        print(f"  [{k}] {srf['surf_name'][q]} ({'fault' if d > 0 else 'joint'}, surface of {nf} triangles, d = {d:g})")
+    for c in m.get("cavities", []):
+        print(f"cavity     {c['name']} ({c['source']}, {c['faces']} triangles): {c['spheres_removed']} spheres removed")
     return 0
 
 
@@ -170,6 +236,12 @@ def make_parser():
     i.add_argument("model")
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=cmd_info)
+    f = sub.add_parser("dfn", help="sample (or read) the scene's fracture network and write it with statistics")
+    f.add_argument("scene")
+    f.add_argument("-o", "--output", required=True, help="output folder (network.csv, .json, .vtu, summary.json)")
+    f.add_argument("--quiet", action="store_true", help="no progress lines")
+    f.add_argument("--json", action="store_true", help="print the JSON summary (per-set statistics)")
+    f.set_defaults(func=cmd_dfn)
     return p
 
 

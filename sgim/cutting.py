@@ -95,6 +95,12 @@ def colours(n, mem: Membership):
 
 
 def touching_pairs(centres, radii, grid: SphereGrid, tol):
+    if len(radii) and float(radii.max()) > 2.0 * float(radii.min()):
+        # unequal radii: a uniform grid of cell 2 r_max holds too many small spheres per cell;
+        # the multi-level grid of sgim/rpack.py gives the same pairs in the same order
+        from .rpack import contact_pairs
+
+        return contact_pairs(centres, radii, tol)
     counts = K.count_pairs(centres, radii, *grid.args(), float(tol))
     offsets = np.zeros(len(counts) + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])

@@ -21,6 +21,16 @@ disc_radius/thickness  (d,) f8
 disc_name              (d,) str
 meta                   () str          JSON: scene name, packing, rules, domain, counts
 scene_toml             () str          the scene file text, for reproduction
+discontinuity_kind     (d+s,) i1       0 disc, 1 triangulated surface, by discontinuity index
+                                       (this and the surf_* keys: only with triangulated
+                                       discontinuities, sgim/surfdisc.py)
+surf_index             (s,) i4         discontinuity index of each surface (after the discs)
+surf_name              (s,) str
+surf_thickness         (s,) f8         0: joint (green / blue), > 0: fault (red)
+surf_vertices          (nv, 3) f8      the vertices of every surface, one block each
+surf_faces             (nf, 3) i8      triangles (indices into surf_vertices), upward normals
+surf_vertex_start      (s+1,) i8       surface k owns vertices [start[k], start[k+1])
+surf_face_start        (s+1,) i8       ... and faces [start[k], start[k+1])
 =====================  ==============  =================================================
 """
 from __future__ import annotations
@@ -55,6 +65,7 @@ class SphereModel:
     disc_name: list
     meta: dict = field(default_factory=dict)
     scene_toml: str = ""
+    surfaces: dict = field(default_factory=dict)  # surf_* arrays (triangulated discontinuities)
 
     ARRAYS = ("centers", "radii", "colour", "colour_source", "bonds", "bonded", "cut_by", "member_sphere",
               "member_disc", "member_kind", "member_offset", "disc_centre", "disc_normal", "disc_radius",
@@ -73,7 +84,7 @@ class SphereModel:
             "bonded": int(self.bonded.sum()),
             "cut": int(len(self.bonded) - self.bonded.sum()),
             "memberships": int(len(self.member_sphere)),
-            "discontinuities": int(len(self.disc_radius)),
+            "discontinuities": int(len(self.disc_radius) + len(self.surfaces.get("surf_thickness", ()))),
         }
 
     # -- npz ---------------------------------------------------------------
@@ -82,6 +93,7 @@ class SphereModel:
         data["disc_name"] = np.array(self.disc_name, dtype=str)
         data["meta"] = np.array(json.dumps(self.meta))
         data["scene_toml"] = np.array(self.scene_toml)
+        data.update({k: np.array(v, dtype=str) if k == "surf_name" else v for k, v in self.surfaces.items()})
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **data)
@@ -96,6 +108,8 @@ class SphereModel:
             kw["disc_name"] = [str(s) for s in z["disc_name"]] if "disc_name" in z.files else []
             kw["meta"] = json.loads(str(z["meta"])) if "meta" in z.files else {}
             kw["scene_toml"] = str(z["scene_toml"]) if "scene_toml" in z.files else ""
+            kw["surfaces"] = {k: ([str(x) for x in z[k]] if k == "surf_name" else z[k])
+                              for k in z.files if k.startswith("surf_") or k == "discontinuity_kind"}
         return cls(**kw)
 
     # -- exports -------------------------------------------------------------

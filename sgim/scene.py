@@ -36,7 +36,7 @@ def _short(value, limit=80):
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-PACKING_KINDS = ("cubic", "hexagonal", "fcc")
+PACKING_KINDS = ("cubic", "hexagonal", "fcc", "random")  # random: sgim/rpack.py
 EXCAVATION_RULES = ("paper", "exact")
 BOND_RULES = ("colour", "geometric")
 OUTPUT_FORMATS = ("npz", "vtu", "txt", "png")
@@ -51,7 +51,8 @@ class Domain:
 @dataclass
 class Packing:
     kind: str
-    radius: float
+    radius: float  # random packing: the largest radius
+    random: object = None  # sgim.rpack.RandomSpec when kind == "random"
 
 
 @dataclass
@@ -103,6 +104,9 @@ class Scene:
     bonds: Bonds
     formats: tuple
     render: Render
+    dfn: object = None  # sgim.dfn.DfnSpec when the scene names joint sets or a network file
+    cavities: list = field(default_factory=list)  # sgim.cavities.Cavity, from [[cavity]]
+    surfaces: list = field(default_factory=list)  # SurfaceDiscontinuity; indices follow every disc
 
     @property
     def n_lattice_sites(self) -> int:
@@ -206,6 +210,8 @@ class _Reader:
 
 
 TOP_KEYS = {"name", "description", "domain", "packing", "excavation", "discontinuity", "bonds", "output", "render"}
+TOP_KEYS |= {"dfn", "joint_set"}  # Monte-Carlo fracture network (sgim/dfn.py)
+TOP_KEYS |= {"cavity"}  # inner excavations (sgim/cavities.py)
 
 
 def load_scene(path) -> Scene:
@@ -238,12 +244,18 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
     domain = Domain(lo, hi)
 
     pk = rd.table(data, "packing", "packing", required=True)
-    rd.known(pk, {"kind", "radius"}, "packing")
-    kind = rd.choice(pk, "kind", "packing.kind", PACKING_KINDS, "cubic")
-    radius = rd.number(pk, "radius", "packing.radius", positive=True)
-    if 2 * radius > float(np.min(hi - lo)):
-        rd.err("packing.radius", radius, f"spheres of diameter {2 * radius:g} do not fit in the domain")
-    packing = Packing(kind, radius)
+    if pk.get("kind") == "random":
+        from .rpack import read_random
+
+        spec, radius = read_random(rd, pk, domain, path)
+        packing = Packing("random", radius, spec)
+    else:
+        rd.known(pk, {"kind", "radius"}, "packing")
+        kind = rd.choice(pk, "kind", "packing.kind", PACKING_KINDS, "cubic")
+        radius = rd.number(pk, "radius", "packing.radius", positive=True)
+        if 2 * radius > float(np.min(hi - lo)):
+            rd.err("packing.radius", radius, f"spheres of diameter {2 * radius:g} do not fit in the domain")
+        packing = Packing(kind, radius)
 
     excavations = []
     exc_list = data.get("excavation", [])
@@ -256,7 +268,11 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
     d_list = data.get("discontinuity", [])
     if not isinstance(d_list, list):
         rd.err("discontinuity", d_list, "must be an array of tables ([[discontinuity]])")
+    surfaces = []
     for k, dt in enumerate(d_list):
+        if isinstance(dt, dict) and any(f in dt for f in SURFACE_FORMS):
+            surfaces.append(_read_surface_discontinuity(rd, dt, f"discontinuity[{k}]", domain, radius, path))
+            continue
         discs.append(_read_disc(rd, dt, f"discontinuity[{k}]", domain, radius))
 
     bt = rd.table(data, "bonds", "bonds")
@@ -293,7 +309,21 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
         width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
         height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)),
     )
-    return Scene(path, text, name, domain, packing, excavations, discs, bonds, tuple(formats), render)
+    scene = Scene(path, text, name, domain, packing, excavations, discs, bonds, tuple(formats), render)
+    if "dfn" in data or "joint_set" in data:
+        from .dfn import read_dfn
+
+        scene.dfn = read_dfn(rd, data, domain, path)
+    scene.surfaces = surfaces
+    cav_list = data.get("cavity", [])
+    if not isinstance(cav_list, list):
+        rd.err("cavity", cav_list, "must be an array of tables ([[cavity]])")
+    scene.cavities = [_read_cavity(rd, ct, f"cavity[{k}]", domain, path) for k, ct in enumerate(cav_list)]
+    if packing.random is not None:  # grading names refer to everything above
+        from .rpack import check_scene
+
+        check_scene(rd, scene)
+    return scene
 
 
 def parse_cut(expr):
@@ -391,3 +421,195 @@ def _read_disc(rd, dt, key, domain, r):
     if np.any(centre + band < domain.min) or np.any(centre - band > domain.max):
         rd.err(f"{key}.centre", centre.tolist(), "discontinuity lies entirely outside the domain box")
     return Disc(name, centre, normal, radius, thick)
+
+
+# --------------------------------------------------------------------------
+# triangulated surfaces: cavities ([[cavity]]) and surface discontinuities
+
+SURFACE_FORMS = ("file", "vertices", "shape")
+_CAVITY_SHAPE_KEYS = {
+    "circular_tunnel": {"path", "radius", "segments"},
+    "horseshoe_tunnel": {"path", "width", "height", "segments"},
+    "ellipsoid": {"centre", "center", "radii", "radius", "segments"},
+    "box": {"min", "max"},
+}
+_SURFACE_SHAPE_KEYS = {
+    "listric": {"trace", "dip_direction", "dip_top", "dip_bottom", "depth", "length", "resolution"},
+}
+
+
+@dataclass
+class SurfaceDiscontinuity:
+    """A triangulated discontinuity: fault (thickness > 0, red inside |signed distance| <= t/2)
+    or joint (green / blue by side within 2r).  The mesh's normals point upward on average."""
+
+    name: str
+    mesh: object  # sgim.meshquery.TriMesh
+    thickness: float
+    key: str
+    source: str
+    params: dict = field(default_factory=dict)
+
+
+def _integer(rd, tab, name, key, default, lo, hi):
+    v = rd.number(tab, name, key, default=default, lo=lo, hi=hi)
+    if not float(v).is_integer():
+        rd.err(key, tab.get(name), "must be an integer")
+    return int(v)
+
+
+def _mesh_from_table(rd, tab, key, scene_path, shape_keys, build_shape):
+    """Vertices and faces from exactly one of: shape (+ its keys), file, vertices + faces.
+
+    Returns (vertices, faces, source, face_key, params); face_key names faces in messages.
+    """
+    from .shapes import ShapeError
+
+    forms = [f for f in SURFACE_FORMS if f in tab]
+    if len(forms) != 1:
+        rd.err(key, sorted(tab), "give exactly one of: shape, file, vertices+faces")
+    form = forms[0]
+    extra = set().union(*shape_keys.values())
+    if form != "shape":
+        for k in tab:
+            if k in extra:
+                rd.err(f"{key}.{k}", tab[k], f"goes with a shape, not with {form}")
+    if form == "vertices":
+        if "faces" not in tab:
+            rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
+        verts = rd.matrix(tab, "vertices", f"{key}.vertices", 3)
+        faces = rd.matrix(tab, "faces", f"{key}.faces", 3, integer=True)
+        bad = np.nonzero((faces < 0) | (faces >= len(verts)))[0]
+        if bad.size:
+            i = int(bad[0])
+            rd.err(f"{key}.faces[{i}]", faces[i].tolist(), f"vertex index out of range 0..{len(verts) - 1}")
+        return verts, faces, "vertices", (f"{key}.faces", None), {}
+    if "faces" in tab:
+        rd.err(f"{key}.faces", tab["faces"], f"faces go with vertices, not with {form}")
+    if form == "file":
+        fname = rd.string(tab, "file", f"{key}.file", "")
+        fpath = Path(fname)
+        if not fpath.is_absolute():
+            fpath = Path(scene_path).parent / fpath
+        try:
+            verts, faces = load_mesh_file(fpath)
+        except MeshError as exc:
+            rd.err(f"{key}.file", fname, exc.message)
+        return verts, faces, f"file {fname}", (f"{key}.file", fname), {"file": fname}
+    shape = rd.choice(tab, "shape", f"{key}.shape", tuple(shape_keys), None)
+    for k in tab:
+        if k in extra and k not in shape_keys[shape]:
+            rd.err(f"{key}.{k}", tab[k], f"not a parameter of shape {shape!r} "
+                                         f"(allowed: {', '.join(sorted(shape_keys[shape]))})")
+    try:
+        verts, faces, params = build_shape(shape)
+    except ShapeError as exc:
+        rd.err(f"{key}.{exc.where}" if exc.where else key, exc.value, exc.message)
+    return verts, faces, shape, (f"{key}.shape", shape), {"shape": shape, **params}
+
+
+def _read_path(rd, tab, key):
+    if "path" not in tab:
+        rd.err(key, None, "missing value")
+    v = tab["path"]
+    if not isinstance(v, list) or len(v) < 2:
+        rd.err(key, v, "must be a list of at least two [x, y, z] points")
+    return rd.matrix(tab, "path", key, 3)
+
+
+def _trimesh_or_error(rd, verts, faces, face_key):
+    from .meshquery import TriMesh
+
+    try:
+        return TriMesh(verts, faces)
+    except ValueError as exc:
+        rd.err(face_key[0], face_key[1], str(exc))
+
+
+def _read_cavity(rd, ct, key, domain, scene_path):
+    from . import shapes
+    from .cavities import Cavity
+
+    if not isinstance(ct, dict):
+        rd.err(key, ct, "must be a table")
+    allowed = {"name", "faces", *SURFACE_FORMS, *set().union(*_CAVITY_SHAPE_KEYS.values())}
+    rd.known(ct, allowed, key)
+    name = rd.string(ct, "name", f"{key}.name", key)
+
+    def build(shape):
+        seg = 48 if shape == "box" else _integer(rd, ct, "segments", f"{key}.segments", 48, 8, 4096)
+        if shape in ("circular_tunnel", "horseshoe_tunnel"):
+            path = _read_path(rd, ct, f"{key}.path")
+            if shape == "circular_tunnel":
+                r = rd.number(ct, "radius", f"{key}.radius", positive=True)
+                v, f = shapes.circular_tunnel(path, r, seg)
+                return v, f, {"path": path.tolist(), "radius": r, "segments": seg}
+            w = rd.number(ct, "width", f"{key}.width", positive=True)
+            h = rd.number(ct, "height", f"{key}.height", positive=True)
+            v, f = shapes.horseshoe_tunnel(path, w, h, seg)
+            return v, f, {"path": path.tolist(), "width": w, "height": h, "segments": seg}
+        if shape == "ellipsoid":
+            cname = "centre" if "centre" in ct or "center" not in ct else "center"
+            c = rd.vector(ct, cname, f"{key}.{cname}")
+            if "radii" in ct and "radius" in ct:
+                rd.err(f"{key}.radius", ct["radius"], "give either radius (a sphere) or radii, not both")
+            if "radius" in ct:
+                radii = np.full(3, rd.number(ct, "radius", f"{key}.radius", positive=True))
+            else:
+                radii = rd.vector(ct, "radii", f"{key}.radii")
+                for a in range(3):
+                    rd.check_number(float(radii[a]), f"{key}.radii[{a}]", positive=True)
+            v, f = shapes.ellipsoid(c, radii, seg)
+            return v, f, {"centre": c.tolist(), "radii": radii.tolist(), "segments": seg}
+        lo = rd.vector(ct, "min", f"{key}.min")
+        hi = rd.vector(ct, "max", f"{key}.max")
+        for a in range(3):
+            if hi[a] <= lo[a]:
+                rd.err(f"{key}.max[{a}]", float(hi[a]), f"must exceed {key}.min[{a}] = {lo[a]:g}")
+        v, f = shapes.box(lo, hi)
+        return v, f, {"min": lo.tolist(), "max": hi.tolist()}
+
+    verts, faces, source, face_key, params = _mesh_from_table(rd, ct, key, scene_path, _CAVITY_SHAPE_KEYS, build)
+    mesh = _trimesh_or_error(rd, verts, faces, face_key)
+    if not mesh.nearly_closed():
+        sizes = mesh.hole_sizes()
+        rd.err(face_key[0], face_key[1] if face_key[1] is not None else f"{len(faces)} faces",
+               f"surface is not closed: {len(mesh.boundary_edges)} boundary edges in {len(sizes)} holes, "
+               f"the largest {sizes.max():.4g} across (small defects up to {0.25 * mesh.thickness:.4g} are "
+               f"tolerated); a cavity needs a closed surface")
+    if np.any(mesh.hi < domain.min) or np.any(mesh.lo > domain.max):
+        rd.err(key, [mesh.lo.tolist(), mesh.hi.tolist()], "cavity lies entirely outside the domain box")
+    return Cavity(name, mesh, key, source, params)
+
+
+def _read_surface_discontinuity(rd, dt, key, domain, r, scene_path):
+    from . import shapes
+    from .meshquery import TriMesh
+
+    allowed = {"name", "thickness", "faces", *SURFACE_FORMS, *set().union(*_SURFACE_SHAPE_KEYS.values())}
+    rd.known(dt, allowed, key)
+    name = rd.string(dt, "name", f"{key}.name", key)
+    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True)
+
+    def build(shape):
+        trace = rd.vector(dt, "trace", f"{key}.trace")
+        p = {"trace": trace.tolist()}
+        p["dip_direction"] = rd.number(dt, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
+        for k in ("dip_top", "dip_bottom"):
+            p[k] = rd.number(dt, k, f"{key}.{k}", lo=0.0, hi=90.0)
+            if p[k] <= 0:
+                rd.err(f"{key}.{k}", p[k], "must be > 0 (a listric fault dips)")
+        for k in ("depth", "length", "resolution"):
+            p[k] = rd.number(dt, k, f"{key}.{k}", positive=True)
+        v, f = shapes.listric(trace, p["dip_direction"], p["dip_top"], p["dip_bottom"], p["depth"], p["length"],
+                              p["resolution"])
+        return v, f, p
+
+    verts, faces, source, face_key, params = _mesh_from_table(rd, dt, key, scene_path, _SURFACE_SHAPE_KEYS, build)
+    mesh = _trimesh_or_error(rd, verts, faces, face_key)
+    if float((mesh.areas * mesh.normals[:, 2]).sum()) < 0:  # normals upward on average
+        mesh = TriMesh(mesh.vertices, mesh.faces[:, [0, 2, 1]])
+    band = max(thick / 2, 2 * r)
+    if np.any(mesh.hi + band < domain.min) or np.any(mesh.lo - band > domain.max):
+        rd.err(key, [mesh.lo.tolist(), mesh.hi.tolist()], "discontinuity lies entirely outside the domain box")
+    return SurfaceDiscontinuity(name, mesh, thick, key, source, params)

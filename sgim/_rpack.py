@@ -1,0 +1,1348 @@
+"""Numba kernels: random dense packing by pocket filling, and packing statistics.
+
+Algorithm (see sgim/rpack.py for the user-facing description)
+------------------------------------------------------------
+A *pocket* is a position where a new sphere of radius r touches three supports at once:
+three spheres, two spheres and a plane, or one sphere and two planes.  Planes are the six
+walls of the domain box and the tangent planes of the constraint surfaces (excavation
+surfaces, cavities, the fill shape) at the foot of the closest point.  After each sphere is
+placed, every pocket it forms with its neighbours is computed in closed form, checked, and
+pushed on a heap keyed by its height z.  The lowest pocket is popped, checked again against
+the spheres placed since it was made, and filled.  Seeds (sphere positions on the floor of
+the region) start the process; it ends when no pocket is left.
+
+Every placed sphere touches its supports exactly (up to rounding), so the overlap is zero up
+to the stated tolerance and spheres touch the walls and surfaces they rest on.
+
+A position P for a sphere of radius r is *admissible* when
+  * it overlaps no placed sphere j by more than ``tol * min(r, r_j)``;
+  * it lies in the box shrunk by r (allowance ``tol * r``);
+  * its distance to every constraint surface is at least ``r (1 - tol)``;
+  * it is not above an excavation surface in vertical projection (the exact rule).
+The side of closed surfaces is not tested for pockets: a pocket touches an admissible sphere,
+and a path of length r_S + r from an admissible centre cannot cross a surface while keeping
+both ends at distance >= r_S and >= r from it (seeds are tested in full by the caller).
+
+Radius modes: 0 constant radius; 1 a radius law given as a pre-drawn sequence, placed through
+a small pool (each pocket takes the largest pooled radius that fits: the placed radii are the
+drawn sequence minus what is left in the pool at the end); 2 graded: the radius is a function
+of the distance to named objects (sgim/grading.py), times an optional spread factor from a
+pre-drawn sequence.
+
+Neighbour search: a multi-level grid of linked lists (level k holds radii in
+[r0 2^k, r0 2^(k+1)), cell 2 x the level's largest radius), with block counts so that a large
+query over a fine level skips empty space.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, objmode, prange
+
+from . import _excavate as EX
+from . import _meshq as MQ
+
+PROGRESS = [None]  # callable(placed, pending) for progress lines, set by sgim/rpack.py
+
+
+def progress_hook(placed, pending):
+    cb = PROGRESS[0]
+    if cb is not None:
+        cb(int(placed), int(pending))
+
+
+SUP_NONE = -100  # seed: no supports
+SUP_PLANE0 = -20  # the candidate's first stored plane
+SUP_PLANE1 = -21  # its second stored plane
+# box walls: -1 - w, w = 0..5 for x-, x+, y-, y+, z-, z+
+
+BLOCK = 4  # cells per block side (block counts of the level grid)
+BIG = 1e300
+DEEP = 0.5  # see the pair loop of pack()
+
+
+# ---------------------------------------------------------------------------
+# closed-form pockets
+
+@njit(cache=True, inline="always")
+def pocket_sss(ax, ay, az, da, bx, by, bz, db, cx, cy, cz, dc, out):
+    """Points P with |P-a| = da, |P-b| = db, |P-c| = dc: count (0 or 2) written to out[0:2]."""
+    ux, uy, uz = bx - ax, by - ay, bz - az
+    vx, vy, vz = cx - ax, cy - ay, cz - az
+    uu = ux * ux + uy * uy + uz * uz
+    vv = vx * vx + vy * vy + vz * vz
+    uv = ux * vx + uy * vy + uz * vz
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    det = nx * nx + ny * ny + nz * nz
+    if det <= 1e-12 * uu * vv:
+        return 0
+    ku = 0.5 * (da * da + uu - db * db)
+    kv = 0.5 * (da * da + vv - dc * dc)
+    al = (ku * vv - kv * uv) / det
+    be = (kv * uu - ku * uv) / det
+    g2 = (da * da - al * ku - be * kv) / det
+    if g2 < 0.0:
+        return 0
+    g = math.sqrt(g2)
+    px = ax + al * ux + be * vx
+    py = ay + al * uy + be * vy
+    pz = az + al * uz + be * vz
+    out[0, 0], out[0, 1], out[0, 2] = px + g * nx, py + g * ny, pz + g * nz
+    out[1, 0], out[1, 1], out[1, 2] = px - g * nx, py - g * ny, pz - g * nz
+    return 2
+
+
+@njit(cache=True, inline="always")
+def pocket_ssp(ax, ay, az, da, bx, by, bz, db, nx, ny, nz, h, out):
+    """Points P with |P-a| = da, |P-b| = db and n.P = h (n unit)."""
+    ha = nx * ax + ny * ay + nz * az - h
+    hb = nx * bx + ny * by + nz * bz - h
+    ra2 = da * da - ha * ha
+    rb2 = db * db - hb * hb
+    if ra2 < 0.0 or rb2 < 0.0:
+        return 0
+    pax, pay, paz = ax - ha * nx, ay - ha * ny, az - ha * nz
+    ex, ey, ez = bx - hb * nx - pax, by - hb * ny - pay, bz - hb * nz - paz
+    e2 = ex * ex + ey * ey + ez * ez
+    if e2 <= 1e-24 * (da * da + db * db):
+        return 0
+    e = math.sqrt(e2)
+    x = (ra2 - rb2 + e2) / (2.0 * e)
+    y2 = ra2 - x * x
+    if y2 < 0.0:
+        return 0
+    y = math.sqrt(y2)
+    ux, uy, uz = ex / e, ey / e, ez / e
+    wx, wy, wz = ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux
+    qx, qy, qz = pax + x * ux, pay + x * uy, paz + x * uz
+    out[0, 0], out[0, 1], out[0, 2] = qx + y * wx, qy + y * wy, qz + y * wz
+    out[1, 0], out[1, 1], out[1, 2] = qx - y * wx, qy - y * wy, qz - y * wz
+    return 2
+
+
+@njit(cache=True, inline="always")
+def pocket_spp(ax, ay, az, da, n1x, n1y, n1z, h1, n2x, n2y, n2z, h2, out):
+    """Points P with |P-a| = da, n1.P = h1, n2.P = h2 (unit normals)."""
+    c = n1x * n2x + n1y * n2y + n1z * n2z
+    s2 = 1.0 - c * c
+    if s2 <= 1e-12:
+        return 0
+    f1 = (h1 - h2 * c) / s2
+    f2 = (h2 - h1 * c) / s2
+    p0x, p0y, p0z = f1 * n1x + f2 * n2x, f1 * n1y + f2 * n2y, f1 * n1z + f2 * n2z
+    dx, dy, dz = n1y * n2z - n1z * n2y, n1z * n2x - n1x * n2z, n1x * n2y - n1y * n2x
+    dl = math.sqrt(dx * dx + dy * dy + dz * dz)
+    dx, dy, dz = dx / dl, dy / dl, dz / dl
+    wx, wy, wz = p0x - ax, p0y - ay, p0z - az
+    b = dx * wx + dy * wy + dz * wz
+    cc = wx * wx + wy * wy + wz * wz - da * da
+    disc = b * b - cc
+    if disc < 0.0:
+        return 0
+    s = math.sqrt(disc)
+    t0, t1 = -b + s, -b - s
+    out[0, 0], out[0, 1], out[0, 2] = p0x + t0 * dx, p0y + t0 * dy, p0z + t0 * dz
+    out[1, 0], out[1, 1], out[1, 2] = p0x + t1 * dx, p0y + t1 * dy, p0z + t1 * dz
+    return 2
+
+
+# ---------------------------------------------------------------------------
+# binary heap (keys float64, values int64)
+
+@njit(cache=True)
+def heap_push(hk, hv, n, key, val):
+    i = n
+    while i > 0:
+        p = (i - 1) >> 1
+        if hk[p] <= key:
+            break
+        hk[i] = hk[p]
+        hv[i] = hv[p]
+        i = p
+    hk[i] = key
+    hv[i] = val
+    return n + 1
+
+
+@njit(cache=True)
+def heap_pop(hk, hv, n):
+    v = hv[0]
+    n -= 1
+    key = hk[n]
+    val = hv[n]
+    i = 0
+    while True:
+        lft = 2 * i + 1
+        if lft >= n:
+            break
+        m = lft
+        if lft + 1 < n and hk[lft + 1] < hk[lft]:
+            m = lft + 1
+        if hk[m] >= key:
+            break
+        hk[i] = hk[m]
+        hv[i] = hv[m]
+        i = m
+    hk[i] = key
+    hv[i] = val
+    return v, n
+
+
+# ---------------------------------------------------------------------------
+# multi-level grid of linked lists
+#
+# G = (org (L,3), cs (L,), dims (L,3), coff (L+1,), rlo (L,), rmax (L,), bdims (L,3), boff (L+1,))
+# head (coff[L],) int32: newest sphere of each cell (-1 empty); nxt (n,) int32: next older sphere
+# bcnt (boff[L],) int32: spheres per block of BLOCK^3 cells
+
+@njit(cache=True, inline="always")
+def level_of(rlo, r):
+    k = rlo.shape[0] - 1
+    while k > 0 and r < rlo[k]:
+        k -= 1
+    return k
+
+
+@njit(cache=True, inline="always")
+def _cidx(org, cs, dims, k, a, v):
+    return min(max(int(math.floor((v - org[k, a]) / cs[k])), 0), dims[k, a] - 1)
+
+
+@njit(cache=True)
+def grid_insert(org, cs, dims, coff, rlo, bdims, boff, head, nxt, bcnt, i, x, y, z, r):
+    k = level_of(rlo, r)
+    ix = _cidx(org, cs, dims, k, 0, x)
+    iy = _cidx(org, cs, dims, k, 1, y)
+    iz = _cidx(org, cs, dims, k, 2, z)
+    c = coff[k] + (iz * dims[k, 1] + iy) * dims[k, 0] + ix
+    nxt[i] = head[c]
+    head[c] = i
+    b = boff[k] + ((iz // BLOCK) * bdims[k, 1] + iy // BLOCK) * bdims[k, 0] + ix // BLOCK
+    bcnt[b] += 1
+
+
+@njit(cache=True)
+def grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R,
+                px, py, pz, reach, out, cap, skip):
+    """Spheres j != skip with |P - x_j| < reach + r_j, written to out; returns the count (<= cap)."""
+    m = 0
+    for k in range(org.shape[0]):
+        ext = reach + rmax[k]
+        x0 = _cidx(org, cs, dims, k, 0, px - ext)
+        x1 = _cidx(org, cs, dims, k, 0, px + ext)
+        y0 = _cidx(org, cs, dims, k, 1, py - ext)
+        y1 = _cidx(org, cs, dims, k, 1, py + ext)
+        z0 = _cidx(org, cs, dims, k, 2, pz - ext)
+        z1 = _cidx(org, cs, dims, k, 2, pz + ext)
+        nxk, nyk = dims[k, 0], dims[k, 1]
+        if (x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1) <= 216:
+            ck = cs[k]
+            e2 = ext * ext
+            for iz in range(z0, z1 + 1):
+                cz0 = org[k, 2] + iz * ck
+                gz = max(cz0 - pz, pz - cz0 - ck, 0.0)
+                if gz * gz > e2:
+                    continue
+                for iy in range(y0, y1 + 1):
+                    cy0 = org[k, 1] + iy * ck
+                    gy = max(cy0 - py, py - cy0 - ck, 0.0)
+                    gyz = gz * gz + gy * gy
+                    if gyz > e2:
+                        continue
+                    base = coff[k] + (iz * nyk + iy) * nxk
+                    for ix in range(x0, x1 + 1):
+                        cx0 = org[k, 0] + ix * ck
+                        gx = max(cx0 - px, px - cx0 - ck, 0.0)
+                        if gyz + gx * gx > e2:  # the cell lies beyond the reach
+                            continue
+                        j = head[base + ix]
+                        while j >= 0:
+                            if j != skip:
+                                dx = X[j, 0] - px
+                                dy = X[j, 1] - py
+                                dz = X[j, 2] - pz
+                                lim = reach + R[j]
+                                if dx * dx + dy * dy + dz * dz < lim * lim and m < cap:
+                                    out[m] = j
+                                    m += 1
+                            j = nxt[j]
+            continue
+        for bz in range(z0 // BLOCK, z1 // BLOCK + 1):
+            for by in range(y0 // BLOCK, y1 // BLOCK + 1):
+                for bx in range(x0 // BLOCK, x1 // BLOCK + 1):
+                    if bcnt[boff[k] + (bz * bdims[k, 1] + by) * bdims[k, 0] + bx] == 0:
+                        continue
+                    for iz in range(max(z0, bz * BLOCK), min(z1, bz * BLOCK + BLOCK - 1) + 1):
+                        for iy in range(max(y0, by * BLOCK), min(y1, by * BLOCK + BLOCK - 1) + 1):
+                            base = coff[k] + (iz * nyk + iy) * nxk
+                            for ix in range(max(x0, bx * BLOCK), min(x1, bx * BLOCK + BLOCK - 1) + 1):
+                                j = head[base + ix]
+                                while j >= 0:
+                                    if j != skip:
+                                        dx = X[j, 0] - px
+                                        dy = X[j, 1] - py
+                                        dz = X[j, 2] - pz
+                                        lim = reach + R[j]
+                                        if dx * dx + dy * dy + dz * dz < lim * lim and m < cap:
+                                            out[m] = j
+                                            m += 1
+                                    j = nxt[j]
+    return m
+
+
+@njit(cache=True)
+def grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, px, py, pz, r, tol, stamp):
+    """Does a sphere (P, r) overlap a placed sphere j >= stamp by more than tol * min(r, r_j)?"""
+    for k in range(org.shape[0]):
+        ext = r + rmax[k]
+        x0 = _cidx(org, cs, dims, k, 0, px - ext)
+        x1 = _cidx(org, cs, dims, k, 0, px + ext)
+        y0 = _cidx(org, cs, dims, k, 1, py - ext)
+        y1 = _cidx(org, cs, dims, k, 1, py + ext)
+        z0 = _cidx(org, cs, dims, k, 2, pz - ext)
+        z1 = _cidx(org, cs, dims, k, 2, pz + ext)
+        nxk, nyk = dims[k, 0], dims[k, 1]
+        if (x1 - x0 + 1) * (y1 - y0 + 1) * (z1 - z0 + 1) <= 216:
+            for iz in range(z0, z1 + 1):
+                for iy in range(y0, y1 + 1):
+                    base = coff[k] + (iz * nyk + iy) * nxk
+                    for ix in range(x0, x1 + 1):
+                        j = head[base + ix]
+                        while j >= stamp:
+                            dx = X[j, 0] - px
+                            dy = X[j, 1] - py
+                            dz = X[j, 2] - pz
+                            lim = r + R[j] - tol * min(r, R[j])
+                            if dx * dx + dy * dy + dz * dz < lim * lim:
+                                return True
+                            j = nxt[j]
+            continue
+        for bz in range(z0 // BLOCK, z1 // BLOCK + 1):
+            for by in range(y0 // BLOCK, y1 // BLOCK + 1):
+                for bx in range(x0 // BLOCK, x1 // BLOCK + 1):
+                    if bcnt[boff[k] + (bz * bdims[k, 1] + by) * bdims[k, 0] + bx] == 0:
+                        continue
+                    for iz in range(max(z0, bz * BLOCK), min(z1, bz * BLOCK + BLOCK - 1) + 1):
+                        for iy in range(max(y0, by * BLOCK), min(y1, by * BLOCK + BLOCK - 1) + 1):
+                            base = coff[k] + (iz * nyk + iy) * nxk
+                            for ix in range(max(x0, bx * BLOCK), min(x1, bx * BLOCK + BLOCK - 1) + 1):
+                                j = head[base + ix]
+                                while j >= stamp:
+                                    dx = X[j, 0] - px
+                                    dy = X[j, 1] - py
+                                    dz = X[j, 2] - pz
+                                    lim = r + R[j] - tol * min(r, R[j])
+                                    if dx * dx + dy * dy + dz * dz < lim * lim:
+                                        return True
+                                    j = nxt[j]
+    return False
+
+
+# ---------------------------------------------------------------------------
+# region: box, constraint meshes, excavation "above" test
+
+@njit(cache=True, inline="always")
+def in_box(lo, hi, px, py, pz, r, tol):
+    a = tol * r
+    return (lo[0] + r - a <= px <= hi[0] - r + a and lo[1] + r - a <= py <= hi[1] - r + a
+            and lo[2] + r - a <= pz <= hi[2] - r + a)
+
+
+@njit(cache=True)
+def mesh_clear(Dc, px, py, pz, r, tol):
+    """-1 when (P, r) keeps at least r (1 - tol) from every constraint mesh, else the mesh index."""
+    lim = r * (1.0 - tol)
+    for k in range(Dc[12].shape[0]):
+        if not MQ.in_root_box(Dc, k, px, py, pz, lim):
+            continue
+        d2 = MQ.closest_point(Dc, k, px, py, pz, lim * lim)[0]
+        if d2 < lim * lim:
+            return k
+    return -1
+
+
+@njit(cache=True)
+def above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, px, py, pz):
+    """Is P on or above an excavation facet in vertical projection (the exact rule's space)?"""
+    if gnx == 0:
+        return False
+    ix = min(max(int(math.floor((px - g0x) / gs)), 0), gnx - 1)
+    iy = min(max(int(math.floor((py - g0y) / gs)), 0), gny - 1)
+    c = iy * gnx + ix
+    for q in range(cstart[c], cstart[c + 1]):
+        if EX.exact_above(ec, cfac[q], px, py, pz):
+            return True
+    return False
+
+
+# ---------------------------------------------------------------------------
+# grading law (the radius as a function of the distance to named objects)
+
+@njit(cache=True, inline="always")
+def grade_radius(d, rf, rc, df, dc):
+    """Fine radius rf up to distance df, coarse rc beyond dc, geometric interpolation with a
+    smoothstep weight s = t^2 (3 - 2t), t = (d - df) / (dc - df), in between."""
+    if d <= df:
+        return rf
+    if d >= dc:
+        return rc
+    t = (d - df) / (dc - df)
+    s = t * t * (3.0 - 2.0 * t)
+    return rf * math.exp(s * math.log(rc / rf))
+
+
+@njit(cache=True)
+def disc_distance(cx, cy, cz, nx, ny, nz, R, px, py, pz):
+    """Distance from P to a disc (centre c, unit normal n, radius R)."""
+    wx, wy, wz = px - cx, py - cy, pz - cz
+    h = wx * nx + wy * ny + wz * nz
+    qx, qy, qz = wx - h * nx, wy - h * ny, wz - h * nz
+    rho = math.sqrt(qx * qx + qy * qy + qz * qz)
+    if rho <= R:
+        return abs(h)
+    return math.sqrt(h * h + (rho - R) ** 2)
+
+
+@njit(cache=True)
+def near_distance(Dg, goff, dcen, dnrm, drad, dhalf, px, py, pz, dmax):
+    """Distance from P to the nearest named object (meshes of Dg less goff[k], discs less their
+    half thickness), at least 0; dmax when nothing is nearer than dmax."""
+    best = dmax
+    for k in range(Dg[12].shape[0]):
+        lim = best + goff[k]
+        if not MQ.in_root_box(Dg, k, px, py, pz, lim):
+            continue
+        d2 = MQ.closest_point(Dg, k, px, py, pz, lim * lim)[0]
+        if d2 < lim * lim:
+            best = min(best, max(math.sqrt(d2) - goff[k], 0.0))
+    for k in range(dcen.shape[0]):
+        d = disc_distance(dcen[k, 0], dcen[k, 1], dcen[k, 2], dnrm[k, 0], dnrm[k, 1], dnrm[k, 2], drad[k],
+                          px, py, pz) - dhalf[k]
+        if d < best:
+            best = max(d, 0.0)
+    return best
+
+
+@njit(cache=True, parallel=True)
+def near_distance_many(Dg, goff, dcen, dnrm, drad, dhalf, pts, dmax):
+    out = np.empty(pts.shape[0])
+    for i in prange(pts.shape[0]):
+        out[i] = near_distance(Dg, goff, dcen, dnrm, drad, dhalf, pts[i, 0], pts[i, 1], pts[i, 2], dmax)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# the packer
+
+
+@njit(cache=True)
+def _grow2(a, n):
+    b = np.empty((n, a.shape[1]), a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def _grow1(a, n, fill):
+    b = np.full(n, fill, a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff, discs, fseq,
+         seeds, seed_r, X0, R0, cap0):
+    """Pocket-filling packing.  Returns (X, R, Dist, counters).
+
+    lo, hi      domain box; tol: overlap tolerance (fraction of the smaller radius)
+    G           grid geometry (org, cs, dims, coff, rlo, rmax, bdims, boff)
+    Dc          constraint meshes (sgim._meshq data; no mesh: roots of length 0)
+    exc         excavation above-test: (ec, cell_start, cell_facets, g0x, g0y, gs, gnx, gny)
+    mode        0 constant rconst; 1 radius sequence rseq through a pool of pool_size; 2 graded
+    grade       (rf, rc, df, dc, spread) for mode 2; Dg, goff, discs = (centres, normals, radii,
+                half thickness): the named objects; fseq: spread factors (mode 2)
+    seeds       (k,3) seed positions, seed_r their radii (mode 2 recomputes them)
+    X0, R0      spheres already placed (kept as they are)
+    """
+    org, cs, dims, coff, rlo, rmax, bdims, boff = G
+    ec, cstart, cfac, g0x, g0y, gs, gnx, gny = exc
+    rf, rc, df, dcg, spread = grade
+    dcen, dnrm, drad, dhalf = discs
+    has_mesh = Dc[12].shape[0] > 0
+    check_region = has_mesh or gnx > 0
+
+    cap = max(cap0, X0.shape[0] + 16)
+    X = np.empty((cap, 3))
+    R = np.empty(cap)
+    DGL = np.zeros(cap)  # bounds of the grading distance of each sphere (mode 2)
+    DGH = np.zeros(cap)
+    pdl, pdh = 0.0, 0.0
+    nxt = np.full(cap, -1, np.int32)
+    FP = np.zeros((cap, 4))  # each sphere's tangent plane on the nearest constraint surface
+    FPk = np.full(cap, -1, np.int8)  # its mesh (-1: none within reach)
+    head = np.full(coff[-1], -1, np.int32)
+    bcnt = np.zeros(boff[-1], np.int32)
+    n = 0
+    for i in range(X0.shape[0]):
+        X[n] = X0[i]
+        R[n] = R0[i]
+        if mode == 2:
+            DGL[n] = near_distance(Dg, goff, dcen, dnrm, drad, dhalf, X0[i, 0], X0[i, 1], X0[i, 2], dcg)
+            DGH[n] = DGL[n] if DGL[n] < dcg else BIG
+        grid_insert(org, cs, dims, coff, rlo, bdims, boff, head, nxt, bcnt, n, X[n, 0], X[n, 1], X[n, 2], R[n])
+        if has_mesh:
+            reach = 3.0 * R[n]
+            best2 = np.inf
+            for k in range(min(Dc[12].shape[0], 64)):
+                if not MQ.in_root_box(Dc, k, X[n, 0], X[n, 1], X[n, 2], reach):
+                    continue
+                d2, qx, qy, qz, f, reg = MQ.closest_point(Dc, k, X[n, 0], X[n, 1], X[n, 2], reach * reach)
+                if f >= 0 and 0.0 < d2 < best2:
+                    best2 = d2
+                    dd = math.sqrt(d2)
+                    FP[n, 0], FP[n, 1], FP[n, 2] = (X[n, 0] - qx) / dd, (X[n, 1] - qy) / dd, (X[n, 2] - qz) / dd
+                    FP[n, 3] = FP[n, 0] * qx + FP[n, 1] * qy + FP[n, 2] * qz
+                    FPk[n] = k
+        n += 1
+    n_initial = n
+
+    # candidates
+    ccap = max(1024, 4 * seeds.shape[0] + 4096)
+    cpos = np.empty((ccap, 3))
+    crad = np.empty(ccap)
+    cstamp = np.empty(ccap, np.int64)
+    csup = np.empty((ccap, 3), np.int64)
+    cpl = np.empty((ccap, 8))
+    freel = np.empty(ccap, np.int64)
+    nfree = 0
+    ncand = 0
+    hk = np.empty(ccap)
+    hv = np.empty(ccap, np.int64)
+    hn = 0
+
+    # pool of radii (mode 1), sorted descending
+    pool = np.empty(max(pool_size, 1))
+    npool = 0
+    iseq = 0
+    if mode == 1:
+        while npool < pool_size and iseq < rseq.shape[0]:
+            v = rseq[iseq]
+            iseq += 1
+            p = npool
+            while p > 0 and pool[p - 1] < v:
+                pool[p] = pool[p - 1]
+                p -= 1
+            pool[p] = v
+            npool += 1
+    ifac = 0
+
+    nbcap = 4096
+    nb = np.empty(nbcap, np.int64)
+    nbx = np.empty((nbcap, 3))
+    nbr = np.empty(nbcap)
+    nbd = np.empty(nbcap)
+    out = np.empty((2, 3))
+    out2 = np.empty((2, 3))
+    pl = np.empty((6 + 64 + 256, 4))  # planes near the new sphere: nx ny nz h (kept side: n.x >= h)
+    plid = np.empty(6 + 64 + 256, np.int64)
+    plown = np.full(6 + 64 + 256, -1, np.int64)  # -1: for every neighbour; a: only for neighbour a
+    # counters: pops, placed, pockets pushed, pop rejects, seeds placed
+    cnt = np.zeros(8, np.int64)
+
+    for s in range(seeds.shape[0]):
+        if ncand == ccap:
+            break
+        c = ncand
+        ncand += 1
+        cpos[c] = seeds[s]
+        crad[c] = seed_r[s]
+        cstamp[c] = 0
+        csup[c, 0] = SUP_NONE
+        csup[c, 1] = SUP_NONE
+        csup[c, 2] = SUP_NONE
+        # seeds go by the height of the floor under them (not of their centre: no sifting by
+        # radius) and before the pockets at the same height
+        hn = heap_push(hk, hv, hn, seeds[s, 2] - seed_r[s] - 1e-9 * (abs(seeds[s, 2]) + seed_r[s]), c)
+
+    while hn > 0:
+        c, hn = heap_pop(hk, hv, hn)
+        freel[nfree] = c
+        nfree += 1
+        cnt[0] += 1
+        r0 = crad[c]
+        px, py, pz = 0.0, 0.0, 0.0
+        placed = False
+        rr = r0
+        # --- choose the radius and the exact position ---------------------------------
+        seed = csup[c, 0] == SUP_NONE
+        if mode != 0 and not seed:
+            # a pocket that the spheres placed since it was made fill for its own radius is gone
+            # for the others too (most pops end here, without trying other radii)
+            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, cpos[c, 0], cpos[c, 1],
+                             cpos[c, 2], r0, tol, cstamp[c]):
+                cnt[3] += 1
+                continue
+        ntry = npool if (mode == 1 and not seed) else 1
+        for t in range(ntry):
+            px, py, pz = cpos[c, 0], cpos[c, 1], cpos[c, 2]
+            if mode == 0 or seed:
+                rr = r0  # seeds keep the radius they were made with
+            elif mode == 1:
+                rr = pool[t]
+                if rr != r0:
+                    if not _reposition(csup, cpl, c, X, R, lo, hi, rr, cpos, out):
+                        continue
+                    px, py, pz = out[0, 0], out[0, 1], out[0, 2]
+            else:
+                fac = fseq[ifac % fseq.shape[0]] if fseq.shape[0] > 0 else 1.0
+                rr = r0
+                ok = True
+                # the distance is 1-Lipschitz: from the creating sphere's bounds, |P - S| <= R_S + rmax
+                sS = csup[c, 0]
+                dlo, dhi = -1.0, BIG
+                if sS >= 0:
+                    dlo = DGL[sS] - (R[sS] + rc * (1.0 + spread))
+                    dhi = DGH[sS] + R[sS] + rc * (1.0 + spread)
+                if dlo >= dcg or dhi <= df:
+                    rnew = (rc if dlo >= dcg else rf) * fac
+                    if rnew != rr:
+                        rr = rnew
+                        if not _reposition(csup, cpl, c, X, R, lo, hi, rr, cpos, out):
+                            break
+                        px, py, pz = out[0, 0], out[0, 1], out[0, 2]
+                    pdl, pdh = max(dlo, 0.0), dhi
+                else:
+                    # fixed point r = law(d(P(r))) * factor, damped after a few rounds; a pocket
+                    # where it does not settle is dropped (its radius would not follow the law)
+                    conv = False
+                    for it in range(40):
+                        d = near_distance(Dg, goff, dcen, dnrm, drad, dhalf, px, py, pz, dcg)
+                        pdl, pdh = d, d
+                        rnew = grade_radius(d, rf, rc, df, dcg) * fac
+                        if abs(rnew - rr) <= 1e-12 * rnew:
+                            conv = True
+                            break
+                        rr = rnew if it < 10 else rr + 0.5 * (rnew - rr)
+                        if not _reposition(csup, cpl, c, X, R, lo, hi, rr, cpos, out):
+                            break
+                        px, py, pz = out[0, 0], out[0, 1], out[0, 2]
+                    if not conv:
+                        break
+            moved = rr != r0
+            if moved or csup[c, 0] == SUP_NONE:
+                if not in_box(lo, hi, px, py, pz, rr, tol):
+                    continue
+                if check_region and not _region_ok(px, py, pz, rr, tol, has_mesh, Dc, ec, cstart, cfac, g0x, g0y,
+                                                   gs, gnx, gny):
+                    continue
+            stamp = 0 if moved else cstamp[c]
+            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, px, py, pz, rr,
+                             tol, stamp):
+                continue
+            placed = True
+            if mode == 1 and not seed:
+                for q in range(t, npool - 1):
+                    pool[q] = pool[q + 1]
+                npool -= 1
+                if iseq < rseq.shape[0]:
+                    v = rseq[iseq]
+                    iseq += 1
+                    p = npool
+                    while p > 0 and pool[p - 1] < v:
+                        pool[p] = pool[p - 1]
+                        p -= 1
+                    pool[p] = v
+                    npool += 1
+            break
+        if not placed:
+            cnt[3] += 1
+            continue
+        # --- place ---------------------------------------------------------------
+        if n == cap:
+            cap = cap + cap // 2 + 16
+            X = _grow2(X, cap)
+            R = _grow1(R, cap, 0.0)
+            DGL = _grow1(DGL, cap, 0.0)
+            DGH = _grow1(DGH, cap, 0.0)
+            nxt = _grow1(nxt, cap, -1)
+            FP = _grow2(FP, cap)
+            FPk = _grow1(FPk, cap, -1)
+        i = n
+        n += 1
+        X[i, 0], X[i, 1], X[i, 2] = px, py, pz
+        R[i] = rr
+        if mode == 2:
+            if not seed:
+                ifac += 1
+            if seed:
+                pdl = near_distance(Dg, goff, dcen, dnrm, drad, dhalf, px, py, pz, dcg)
+                pdh = pdl if pdl < dcg else BIG
+            DGL[i], DGH[i] = pdl, (pdh if pdh < dcg else BIG)
+        grid_insert(org, cs, dims, coff, rlo, bdims, boff, head, nxt, bcnt, i, px, py, pz, rr)
+        cnt[1] += 1
+        if cnt[1] % 50000 == 0:
+            with objmode():
+                progress_hook(n, hn)
+        if csup[c, 0] == SUP_NONE:
+            cnt[4] += 1
+
+        # --- new pockets ---------------------------------------------------------
+        if mode == 0:
+            rn = rconst
+        elif mode == 1:
+            if npool == 0:
+                continue
+            rn = pool[npool - 1]
+        else:
+            rn = grade_radius(DGL[i], rf, rc, df, dcg) * (1.0 - spread)
+        m = grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, px, py, pz,
+                        rr + 2.0 * rn, nb, nbcap, i)
+        # nearest first: the closest neighbours exclude the most pocket directions
+        for a in range(m):
+            j = nb[a]
+            nbd[a] = (X[j, 0] - px) ** 2 + (X[j, 1] - py) ** 2 + (X[j, 2] - pz) ** 2 - (R[j] + rr) ** 2
+        for a in range(1, m):
+            j = nb[a]
+            dj = nbd[a]
+            q = a
+            while q > 0 and nbd[q - 1] > dj:
+                nbd[q] = nbd[q - 1]
+                nb[q] = nb[q - 1]
+                q -= 1
+            nbd[q] = dj
+            nb[q] = j
+        for a in range(m):
+            j = nb[a]
+            nbx[a, 0], nbx[a, 1], nbx[a, 2] = X[j, 0], X[j, 1], X[j, 2]
+            nbr[a] = R[j]
+        # planes near the new sphere
+        npl = 0
+        for w in range(6):
+            ax = w // 2
+            if w % 2 == 0:
+                hgt = X[i, ax] - lo[ax]
+            else:
+                hgt = hi[ax] - X[i, ax]
+            if hgt < rr + 2.0 * rn:
+                pl[npl, 0], pl[npl, 1], pl[npl, 2] = 0.0, 0.0, 0.0
+                if w % 2 == 0:
+                    pl[npl, ax] = 1.0
+                    pl[npl, 3] = lo[ax]
+                else:
+                    pl[npl, ax] = -1.0
+                    pl[npl, 3] = -hi[ax]
+                plid[npl] = -1 - w
+                npl += 1
+        for p in range(npl):
+            plown[p] = -1
+        if has_mesh:
+            reach = rr + 2.0 * rn
+            best2 = np.inf
+            for k in range(min(Dc[12].shape[0], 64)):
+                if not MQ.in_root_box(Dc, k, px, py, pz, reach):
+                    continue
+                d2, qx, qy, qz, f, reg = MQ.closest_point(Dc, k, px, py, pz, reach * reach)
+                if f < 0 or d2 <= 0.0:
+                    continue
+                dd = math.sqrt(d2)
+                pl[npl, 0], pl[npl, 1], pl[npl, 2] = (px - qx) / dd, (py - qy) / dd, (pz - qz) / dd
+                pl[npl, 3] = pl[npl, 0] * qx + pl[npl, 1] * qy + pl[npl, 2] * qz
+                plid[npl] = SUP_PLANE0
+                plown[npl] = -1
+                if d2 < best2:  # the sphere's own tangent plane, for the pockets of later neighbours
+                    best2 = d2
+                    FP[i, 0], FP[i, 1], FP[i, 2], FP[i, 3] = pl[npl, 0], pl[npl, 1], pl[npl, 2], pl[npl, 3]
+                    FPk[i] = k
+                npl += 1
+            # the tangent planes of the neighbours (a curved or kinked surface: the pocket touching S,
+            # A and the surface may rest on the part of the surface nearest to A, not to S)
+            npl0 = npl
+            for a in range(m):
+                ja = nb[a]
+                if FPk[ja] < 0 or npl == pl.shape[0]:
+                    continue
+                same = False
+                for p in range(npl0):
+                    if plid[p] == SUP_PLANE0 and pl[p, 0] * FP[ja, 0] + pl[p, 1] * FP[ja, 1] + pl[p, 2] * FP[ja, 2] \
+                            > 1.0 - 1e-9 and abs(pl[p, 3] - FP[ja, 3]) <= 1e-9 * (1.0 + abs(FP[ja, 3])):
+                        same = True
+                if same or FP[ja, 0] * px + FP[ja, 1] * py + FP[ja, 2] * pz - FP[ja, 3] >= rr + 2.0 * rn:
+                    continue
+                pl[npl, 0], pl[npl, 1], pl[npl, 2], pl[npl, 3] = FP[ja, 0], FP[ja, 1], FP[ja, 2], FP[ja, 3]
+                plid[npl] = SUP_PLANE0
+                plown[npl] = a
+                npl += 1
+
+        # (S, A, B)
+        zcut = pz - DEEP * (rr + rn)
+        for a in range(m):
+            ax_, ay_, az_, ra = nbx[a, 0], nbx[a, 1], nbx[a, 2], nbr[a]
+            for b in range(a + 1, m):
+                bx_, by_, bz_, rb = nbx[b, 0], nbx[b, 1], nbx[b, 2], nbr[b]
+                if az_ < zcut and bz_ < zcut:
+                    continue
+                lim = ra + rb + 2.0 * rn
+                if (ax_ - bx_) ** 2 + (ay_ - by_) ** 2 + (az_ - bz_) ** 2 >= lim * lim:
+                    continue
+                k2 = pocket_sss(px, py, pz, rr + rn, ax_, ay_, az_, ra + rn, bx_, by_, bz_, rb + rn, out)
+                for q in range(k2):
+                    qx, qy, qz = out[q, 0], out[q, 1], out[q, 2]
+                    if not (in_box(lo, hi, qx, qy, qz, rn, tol) and _clear_of(qx, qy, qz, rn, tol, nbx, nbr, m, a, b)):
+                        continue
+                    if check_region and not _region_ok(qx, qy, qz, rn, tol, has_mesh, Dc, ec, cstart, cfac, g0x,
+                                                       g0y, gs, gnx, gny):
+                        continue
+                    if nfree > 0:
+                        nfree -= 1
+                        cc = freel[nfree]
+                    else:
+                        if ncand == ccap:
+                            ccap = ccap * 2
+                            cpos = _grow2(cpos, ccap)
+                            crad = _grow1(crad, ccap, 0.0)
+                            cstamp = _grow1(cstamp, ccap, 0)
+                            csup = _grow2(csup, ccap)
+                            cpl = _grow2(cpl, ccap)
+                            freel = _grow1(freel, ccap, 0)
+                            hk = _grow1(hk, ccap, 0.0)
+                            hv = _grow1(hv, ccap, 0)
+                        cc = ncand
+                        ncand += 1
+                    cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
+                    crad[cc] = rn
+                    cstamp[cc] = n
+                    csup[cc, 0], csup[cc, 1], csup[cc, 2] = i, nb[a], nb[b]
+                    hn = heap_push(hk, hv, hn, qz, cc)
+                    cnt[2] += 1
+        # (S, A, plane) and (S, plane, plane)
+        for p in range(npl):
+            nx_, ny_, nz_, h0 = pl[p, 0], pl[p, 1], pl[p, 2], pl[p, 3]
+            for a in range(m):
+                if plown[p] >= 0 and plown[p] != a:
+                    continue
+                ax_, ay_, az_, ra = nbx[a, 0], nbx[a, 1], nbx[a, 2], nbr[a]
+                if nx_ * ax_ + ny_ * ay_ + nz_ * az_ - h0 >= ra + 2.0 * rn:
+                    continue
+                k2 = pocket_ssp(px, py, pz, rr + rn, ax_, ay_, az_, ra + rn, nx_, ny_, nz_, h0 + rn, out)
+                for q in range(k2):
+                    qx, qy, qz = out[q, 0], out[q, 1], out[q, 2]
+                    if not (in_box(lo, hi, qx, qy, qz, rn, tol) and _clear_of(qx, qy, qz, rn, tol, nbx, nbr, m, a, -1)):
+                        continue
+                    snx, sny, snz, sh = nx_, ny_, nz_, h0
+                    if check_region and not _region_ok(qx, qy, qz, rn, tol, has_mesh, Dc, ec, cstart, cfac, g0x,
+                                                       g0y, gs, gnx, gny):
+                        if plid[p] != SUP_PLANE0:
+                            continue
+                        ok, qx, qy, qz, snx, sny, snz, sh = _refine(0, px, py, pz, rr + rn, ax_, ay_, az_, ra + rn,
+                                                                    0.0, 0.0, 0.0, 0.0, nx_, ny_, nz_, h0, rn, tol,
+                                                                    qx, qy, qz, Dc, out2)
+                        if not ok or not (in_box(lo, hi, qx, qy, qz, rn, tol)
+                                          and _clear_of(qx, qy, qz, rn, tol, nbx, nbr, m, a, -1)):
+                            continue
+                        if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, qx, qy, qz):
+                            continue
+                    if nfree > 0:
+                        nfree -= 1
+                        cc = freel[nfree]
+                    else:
+                        if ncand == ccap:
+                            ccap = ccap * 2
+                            cpos = _grow2(cpos, ccap)
+                            crad = _grow1(crad, ccap, 0.0)
+                            cstamp = _grow1(cstamp, ccap, 0)
+                            csup = _grow2(csup, ccap)
+                            cpl = _grow2(cpl, ccap)
+                            freel = _grow1(freel, ccap, 0)
+                            hk = _grow1(hk, ccap, 0.0)
+                            hv = _grow1(hv, ccap, 0)
+                        cc = ncand
+                        ncand += 1
+                    cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
+                    crad[cc] = rn
+                    cstamp[cc] = n
+                    csup[cc, 0], csup[cc, 1] = i, nb[a]
+                    csup[cc, 2] = plid[p]
+                    if plid[p] == SUP_PLANE0:
+                        cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
+                    hn = heap_push(hk, hv, hn, qz, cc)
+                    cnt[2] += 1
+            for p2 in range(p + 1, npl):
+                if (plid[p] == SUP_PLANE0 and plid[p2] == SUP_PLANE0) or plown[p] >= 0 or plown[p2] >= 0:
+                    continue
+                mx_, my_, mz_, h1 = pl[p2, 0], pl[p2, 1], pl[p2, 2], pl[p2, 3]
+                k2 = pocket_spp(px, py, pz, rr + rn, nx_, ny_, nz_, h0 + rn, mx_, my_, mz_, h1 + rn, out)
+                sp = p if plid[p] == SUP_PLANE0 else p2  # the surface plane, if any
+                for q in range(k2):
+                    qx, qy, qz = out[q, 0], out[q, 1], out[q, 2]
+                    if not (in_box(lo, hi, qx, qy, qz, rn, tol) and _clear_of(qx, qy, qz, rn, tol, nbx, nbr, m, -1, -1)):
+                        continue
+                    snx, sny, snz, sh = pl[sp, 0], pl[sp, 1], pl[sp, 2], pl[sp, 3]
+                    if check_region and not _region_ok(qx, qy, qz, rn, tol, has_mesh, Dc, ec, cstart, cfac, g0x,
+                                                       g0y, gs, gnx, gny):
+                        if plid[sp] != SUP_PLANE0:
+                            continue
+                        wp = p2 if sp == p else p
+                        ok, qx, qy, qz, snx, sny, snz, sh = _refine(1, px, py, pz, rr + rn, 0.0, 0.0, 0.0, 0.0,
+                                                                    pl[wp, 0], pl[wp, 1], pl[wp, 2], pl[wp, 3] + rn,
+                                                                    snx, sny, snz, sh, rn, tol, qx, qy, qz, Dc, out2)
+                        if not ok or not (in_box(lo, hi, qx, qy, qz, rn, tol)
+                                          and _clear_of(qx, qy, qz, rn, tol, nbx, nbr, m, -1, -1)):
+                            continue
+                        if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, qx, qy, qz):
+                            continue
+                    if nfree > 0:
+                        nfree -= 1
+                        cc = freel[nfree]
+                    else:
+                        if ncand == ccap:
+                            ccap = ccap * 2
+                            cpos = _grow2(cpos, ccap)
+                            crad = _grow1(crad, ccap, 0.0)
+                            cstamp = _grow1(cstamp, ccap, 0)
+                            csup = _grow2(csup, ccap)
+                            cpl = _grow2(cpl, ccap)
+                            freel = _grow1(freel, ccap, 0)
+                            hk = _grow1(hk, ccap, 0.0)
+                            hv = _grow1(hv, ccap, 0)
+                        cc = ncand
+                        ncand += 1
+                    cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
+                    crad[cc] = rn
+                    cstamp[cc] = n
+                    # a wall first, then the other support (a wall or the stored plane)
+                    w1, w2 = plid[p], plid[p2]
+                    if w1 == SUP_PLANE0:
+                        w1, w2 = w2, w1
+                    csup[cc, 0], csup[cc, 1], csup[cc, 2] = i, w1, w2
+                    if w2 == SUP_PLANE0:
+                        cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
+                    hn = heap_push(hk, hv, hn, qz, cc)
+                    cnt[2] += 1
+    cnt[5] = n_initial
+    cnt[6] = npool
+    return X[:n].copy(), R[:n].copy(), DGL[:n].copy(), cnt
+
+
+@njit(cache=True, inline="always")
+def _clear_of(qx, qy, qz, rn, tol, nbx, nbr, m, a, b):
+    """The new pocket overlaps none of the new sphere's neighbours except a and b (complete: any
+    sphere that overlaps it is a neighbour of the new sphere)."""
+    for e in range(m):
+        if e == a or e == b:
+            continue
+        dx = nbx[e, 0] - qx
+        dy = nbx[e, 1] - qy
+        dz = nbx[e, 2] - qz
+        lim = rn + nbr[e] - tol * min(rn, nbr[e])
+        if dx * dx + dy * dy + dz * dz < lim * lim:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _region_ok(qx, qy, qz, rn, tol, has_mesh, Dc, ec, cstart, cfac, g0x, g0y, gs, gnx, gny):
+    """The constraint meshes and the excavation test."""
+    if has_mesh and mesh_clear(Dc, qx, qy, qz, rn, tol) >= 0:
+        return False
+    if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, qx, qy, qz):
+        return False
+    return True
+
+
+@njit(cache=True)
+def _refine(kind, sx, sy, sz, ds, ax, ay, az, da, mx, my, mz, hm, nx, ny, nz, h0, rn, tol, qx, qy, qz, Dc,
+            out2):
+    """A pocket against a curved constraint surface: replace the tangent plane (n, h0) by the
+    tangent plane at the pocket's own foot point until the pocket clears every mesh (at most
+    four rounds).  The other support is sphere a (kind 0, contact distance da) or the plane
+    m.P = hm (kind 1, already offset).  Returns (ok, qx, qy, qz, nx, ny, nz, h0)."""
+    for it in range(5):
+        km = mesh_clear(Dc, qx, qy, qz, rn, tol)
+        if km < 0:
+            return True, qx, qy, qz, nx, ny, nz, h0
+        if it == 4:
+            break
+        d2, fx, fy, fz, f, reg = MQ.closest_point(Dc, km, qx, qy, qz, np.inf)
+        if f < 0 or d2 <= 0.0:
+            break
+        dd = math.sqrt(d2)
+        tx, ty, tz = (qx - fx) / dd, (qy - fy) / dd, (qz - fz) / dd
+        if tx * nx + ty * ny + tz * nz < 0.0:  # the pocket crossed the surface
+            tx, ty, tz = -tx, -ty, -tz
+        nx, ny, nz = tx, ty, tz
+        h0 = tx * fx + ty * fy + tz * fz
+        if kind == 0:
+            k = pocket_ssp(sx, sy, sz, ds, ax, ay, az, da, nx, ny, nz, h0 + rn, out2)
+        else:
+            k = pocket_spp(sx, sy, sz, ds, nx, ny, nz, h0 + rn, mx, my, mz, hm, out2)
+        if k == 0:
+            break
+        e0 = (out2[0, 0] - qx) ** 2 + (out2[0, 1] - qy) ** 2 + (out2[0, 2] - qz) ** 2
+        e1 = (out2[1, 0] - qx) ** 2 + (out2[1, 1] - qy) ** 2 + (out2[1, 2] - qz) ** 2
+        w = 0 if e0 <= e1 else 1
+        qx, qy, qz = out2[w, 0], out2[w, 1], out2[w, 2]
+    return False, qx, qy, qz, nx, ny, nz, h0
+
+
+@njit(cache=True)
+def _support_plane(sup, cpl, c, k, lo, hi):
+    """Plane (n, h) of support code sup (a wall or stored plane k)."""
+    if sup == SUP_PLANE0 or sup == SUP_PLANE1:
+        o = 0 if sup == SUP_PLANE0 else 4
+        return cpl[c, o], cpl[c, o + 1], cpl[c, o + 2], cpl[c, o + 3]
+    w = -1 - sup
+    ax = w // 2
+    n = np.zeros(3)
+    if w % 2 == 0:
+        n[ax] = 1.0
+        return n[0], n[1], n[2], lo[ax]
+    n[ax] = -1.0
+    return n[0], n[1], n[2], -hi[ax]
+
+
+@njit(cache=True)
+def _reposition(csup, cpl, c, X, R, lo, hi, r, cpos, out):
+    """Position of candidate c's pocket for radius r (the solution nearest its stored position),
+    written to out[0]; False when the pocket does not exist for r."""
+    s0, s1, s2 = csup[c, 0], csup[c, 1], csup[c, 2]
+    if s0 == SUP_NONE:
+        out[0, 0], out[0, 1], out[0, 2] = cpos[c, 0], cpos[c, 1], cpos[c, 2]
+        return True
+    k = 0
+    if s1 >= 0 and s2 >= 0:
+        k = pocket_sss(X[s0, 0], X[s0, 1], X[s0, 2], R[s0] + r, X[s1, 0], X[s1, 1], X[s1, 2], R[s1] + r,
+                       X[s2, 0], X[s2, 1], X[s2, 2], R[s2] + r, out)
+    elif s1 >= 0:
+        nx, ny, nz, h = _support_plane(s2, cpl, c, 0, lo, hi)
+        k = pocket_ssp(X[s0, 0], X[s0, 1], X[s0, 2], R[s0] + r, X[s1, 0], X[s1, 1], X[s1, 2], R[s1] + r,
+                       nx, ny, nz, h + r, out)
+    else:
+        nx, ny, nz, h = _support_plane(s1, cpl, c, 0, lo, hi)
+        mx, my, mz, h2 = _support_plane(s2, cpl, c, 0, lo, hi)
+        k = pocket_spp(X[s0, 0], X[s0, 1], X[s0, 2], R[s0] + r, nx, ny, nz, h + r, mx, my, mz, h2 + r, out)
+    if k == 0:
+        return False
+    d0 = (out[0, 0] - cpos[c, 0]) ** 2 + (out[0, 1] - cpos[c, 1]) ** 2 + (out[0, 2] - cpos[c, 2]) ** 2
+    d1 = (out[1, 0] - cpos[c, 0]) ** 2 + (out[1, 1] - cpos[c, 1]) ** 2 + (out[1, 2] - cpos[c, 2]) ** 2
+    if d1 < d0:
+        out[0, 0], out[0, 1], out[0, 2] = out[1, 0], out[1, 1], out[1, 2]
+    return True
+
+
+# ---------------------------------------------------------------------------
+# static multi-level grid over finished spheres: pairs, contacts, clearance
+
+@njit(cache=True)
+def grid_build(X, R, org, cs, dims, coff, rlo, bdims, boff):
+    head = np.full(coff[-1], -1, np.int32)
+    nxt = np.full(X.shape[0], -1, np.int32)
+    bcnt = np.zeros(boff[-1], np.int32)
+    for i in range(X.shape[0]):
+        grid_insert(org, cs, dims, coff, rlo, bdims, boff, head, nxt, bcnt, i, X[i, 0], X[i, 1], X[i, 2], R[i])
+    return head, nxt, bcnt
+
+
+@njit(cache=True)
+def _pairs_of(i, X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, tol, out_j, pos):
+    """Pairs (i, j), j > i, with |ci - cj| <= (ri + rj)(1 + tol); with out_j, written there sorted by j."""
+    px, py, pz, ri = X[i, 0], X[i, 1], X[i, 2], R[i]
+    n = 0
+    for k in range(org.shape[0]):
+        ext = (ri + rmax[k]) * (1.0 + tol)
+        x0 = _cidx(org, cs, dims, k, 0, px - ext)
+        x1 = _cidx(org, cs, dims, k, 0, px + ext)
+        y0 = _cidx(org, cs, dims, k, 1, py - ext)
+        y1 = _cidx(org, cs, dims, k, 1, py + ext)
+        z0 = _cidx(org, cs, dims, k, 2, pz - ext)
+        z1 = _cidx(org, cs, dims, k, 2, pz + ext)
+        nxk, nyk = dims[k, 0], dims[k, 1]
+        for bz in range(z0 // BLOCK, z1 // BLOCK + 1):
+            for by in range(y0 // BLOCK, y1 // BLOCK + 1):
+                for bx in range(x0 // BLOCK, x1 // BLOCK + 1):
+                    if bcnt[boff[k] + (bz * bdims[k, 1] + by) * bdims[k, 0] + bx] == 0:
+                        continue
+                    for iz in range(max(z0, bz * BLOCK), min(z1, bz * BLOCK + BLOCK - 1) + 1):
+                        for iy in range(max(y0, by * BLOCK), min(y1, by * BLOCK + BLOCK - 1) + 1):
+                            base = coff[k] + (iz * nyk + iy) * nxk
+                            for ix in range(max(x0, bx * BLOCK), min(x1, bx * BLOCK + BLOCK - 1) + 1):
+                                j = head[base + ix]
+                                while j > i:  # lists run from the newest (largest) index down
+                                    dx = X[j, 0] - px
+                                    dy = X[j, 1] - py
+                                    dz = X[j, 2] - pz
+                                    lim = (ri + R[j]) * (1.0 + tol)
+                                    if dx * dx + dy * dy + dz * dz <= lim * lim:
+                                        if out_j is not None:
+                                            p = pos + n
+                                            while p > pos and out_j[p - 1] > j:
+                                                out_j[p] = out_j[p - 1]
+                                                p -= 1
+                                            out_j[p] = j
+                                        n += 1
+                                    j = nxt[j]
+    return n
+
+
+@njit(cache=True, parallel=True)
+def count_pairs(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, tol):
+    counts = np.empty(X.shape[0], np.int64)
+    for i in prange(X.shape[0]):
+        counts[i] = _pairs_of(i, X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, tol, None, 0)
+    return counts
+
+
+@njit(cache=True, parallel=True)
+def fill_pairs(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, tol, offsets, out):
+    for i in prange(X.shape[0]):
+        k = _pairs_of(i, X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, tol, out[:, 1], offsets[i])
+        for q in range(offsets[i], offsets[i] + k):
+            out[q, 0] = i
+
+
+@njit(cache=True, parallel=True)
+def overlap_stats(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt):
+    """Largest overlap (ri + rj - d) / min(ri, rj) of each sphere with a later one (0 if none)."""
+    out = np.zeros(X.shape[0])
+    for i in prange(X.shape[0]):
+        px, py, pz, ri = X[i, 0], X[i, 1], X[i, 2], R[i]
+        best = 0.0
+        for k in range(org.shape[0]):
+            ext = ri + rmax[k]
+            x0 = _cidx(org, cs, dims, k, 0, px - ext)
+            x1 = _cidx(org, cs, dims, k, 0, px + ext)
+            y0 = _cidx(org, cs, dims, k, 1, py - ext)
+            y1 = _cidx(org, cs, dims, k, 1, py + ext)
+            z0 = _cidx(org, cs, dims, k, 2, pz - ext)
+            z1 = _cidx(org, cs, dims, k, 2, pz + ext)
+            for iz in range(z0, z1 + 1):
+                for iy in range(y0, y1 + 1):
+                    base = coff[k] + (iz * dims[k, 1] + iy) * dims[k, 0]
+                    for ix in range(x0, x1 + 1):
+                        j = head[base + ix]
+                        while j > i:
+                            d = math.sqrt((X[j, 0] - px) ** 2 + (X[j, 1] - py) ** 2 + (X[j, 2] - pz) ** 2)
+                            ov = (ri + R[j] - d) / min(ri, R[j])
+                            if ov > best:
+                                best = ov
+                            j = nxt[j]
+        out[i] = best
+    return out
+
+
+@njit(cache=True)
+def clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi, Dc, exc,
+                    px, py, pz, search, eps, gbuf):
+    rlo0 = rmax[0] * 0.5
+    """Clearance of P: distance to the nearest sphere surface, box face or constraint surface
+    (capped at search); -inf outside the box or above an excavation.  With gbuf (m,3), also the
+    unit directions away from the constraints within eps of the minimum.
+    Returns (clearance, nearest sphere or -1, number of directions)."""
+    ec, cstart, cfac, g0x, g0y, gs, gnx, gny = exc
+    if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, px, py, pz):
+        return -np.inf, -1, 0
+    best = min(search, px - lo[0], py - lo[1], pz - lo[2], hi[0] - px, hi[1] - py, hi[2] - pz)
+    bj = -1
+    if best < 0.0:
+        return -np.inf, -1, 0
+    # iterative deepening: spheres whose surface is within rho, rho doubling from a fraction of
+    # the smallest radius until a sphere is found (a wide first search would visit thousands of
+    # small spheres around a probe in a fine zone)
+    rho = 0.5 * rlo0
+    while True:
+        lim = min(best, rho)
+        found = _nearest_pass(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, px, py, pz, lim)
+        if found[1] >= 0 and found[0] < best:
+            best, bj = found[0], found[1]
+        if best <= rho or rho >= search:
+            break
+        rho *= 2.0
+    for k in range(Dc[12].shape[0]):
+        if not MQ.in_root_box(Dc, k, px, py, pz, best):
+            continue
+        d2 = MQ.closest_point(Dc, k, px, py, pz, best * best)[0]
+        if d2 < best * best:
+            best = math.sqrt(d2)
+    if gbuf is None:
+        return best, bj, 0
+    return _active_dirs(X, R, org, cs, dims, coff, rmax, lo, hi, head, nxt, Dc, px, py, pz, best, bj, eps, gbuf)
+
+
+@njit(cache=True)
+def _nearest_pass(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, px, py, pz, lim):
+    """Nearest sphere surface within lim of P: (distance, sphere) or (lim, -1)."""
+    best = lim
+    bj = -1
+    for k in range(org.shape[0]):
+        ext = best + rmax[k]
+        x0 = _cidx(org, cs, dims, k, 0, px - ext)
+        x1 = _cidx(org, cs, dims, k, 0, px + ext)
+        y0 = _cidx(org, cs, dims, k, 1, py - ext)
+        y1 = _cidx(org, cs, dims, k, 1, py + ext)
+        z0 = _cidx(org, cs, dims, k, 2, pz - ext)
+        z1 = _cidx(org, cs, dims, k, 2, pz + ext)
+        for bz in range(z0 // BLOCK, z1 // BLOCK + 1):
+            for by in range(y0 // BLOCK, y1 // BLOCK + 1):
+                for bx in range(x0 // BLOCK, x1 // BLOCK + 1):
+                    if bcnt[boff[k] + (bz * bdims[k, 1] + by) * bdims[k, 0] + bx] == 0:
+                        continue
+                    for iz in range(max(z0, bz * BLOCK), min(z1, bz * BLOCK + BLOCK - 1) + 1):
+                        for iy in range(max(y0, by * BLOCK), min(y1, by * BLOCK + BLOCK - 1) + 1):
+                            base = coff[k] + (iz * dims[k, 1] + iy) * dims[k, 0]
+                            for ix in range(max(x0, bx * BLOCK), min(x1, bx * BLOCK + BLOCK - 1) + 1):
+                                j = head[base + ix]
+                                while j >= 0:
+                                    d = math.sqrt((X[j, 0] - px) ** 2 + (X[j, 1] - py) ** 2
+                                                  + (X[j, 2] - pz) ** 2) - R[j]
+                                    if d < best:
+                                        best = d
+                                        bj = j
+                                    j = nxt[j]
+    return best, bj
+
+
+@njit(cache=True)
+def _active_dirs(X, R, org, cs, dims, coff, rmax, lo, hi, head, nxt, Dc, px, py, pz, best, bj, eps, gbuf):
+    """Unit directions away from the constraints within eps of the clearance best."""
+    lim = best + eps
+    m = 0
+    cap = gbuf.shape[0]
+    for a in range(3):
+        if (px if a == 0 else (py if a == 1 else pz)) - lo[a] <= lim and m < cap:
+            gbuf[m, 0], gbuf[m, 1], gbuf[m, 2] = 0.0, 0.0, 0.0
+            gbuf[m, a] = 1.0
+            m += 1
+        if hi[a] - (px if a == 0 else (py if a == 1 else pz)) <= lim and m < cap:
+            gbuf[m, 0], gbuf[m, 1], gbuf[m, 2] = 0.0, 0.0, 0.0
+            gbuf[m, a] = -1.0
+            m += 1
+    for k in range(org.shape[0]):
+        ext = lim + rmax[k]
+        x0 = _cidx(org, cs, dims, k, 0, px - ext)
+        x1 = _cidx(org, cs, dims, k, 0, px + ext)
+        y0 = _cidx(org, cs, dims, k, 1, py - ext)
+        y1 = _cidx(org, cs, dims, k, 1, py + ext)
+        z0 = _cidx(org, cs, dims, k, 2, pz - ext)
+        z1 = _cidx(org, cs, dims, k, 2, pz + ext)
+        for iz in range(z0, z1 + 1):
+            for iy in range(y0, y1 + 1):
+                base = coff[k] + (iz * dims[k, 1] + iy) * dims[k, 0]
+                for ix in range(x0, x1 + 1):
+                    j = head[base + ix]
+                    while j >= 0:
+                        dx, dy, dz = px - X[j, 0], py - X[j, 1], pz - X[j, 2]
+                        dd = math.sqrt(dx * dx + dy * dy + dz * dz)
+                        if dd - R[j] <= lim and dd > 0.0 and m < cap:
+                            gbuf[m, 0], gbuf[m, 1], gbuf[m, 2] = dx / dd, dy / dd, dz / dd
+                            m += 1
+                        j = nxt[j]
+    for k in range(Dc[12].shape[0]):
+        if not MQ.in_root_box(Dc, k, px, py, pz, lim):
+            continue
+        d2, qx, qy, qz, f, reg = MQ.closest_point(Dc, k, px, py, pz, lim * lim)
+        if f >= 0 and d2 > 0.0 and m < cap:
+            dd = math.sqrt(d2)
+            gbuf[m, 0], gbuf[m, 1], gbuf[m, 2] = (px - qx) / dd, (py - qy) / dd, (pz - qz) / dd
+            m += 1
+    return best, bj, m
+
+
+@njit(cache=True)
+def min_norm_hull(g, m, out):
+    """Point of smallest norm in the convex hull of g[0:m] (Gilbert's algorithm): the steepest
+    ascent direction of min_j (g_j . d) over unit d; zero at a local maximum of the clearance."""
+    out[0], out[1], out[2] = g[0, 0], g[0, 1], g[0, 2]
+    for it in range(100):
+        best = np.inf
+        bj = 0
+        for j in range(m):
+            v = g[j, 0] * out[0] + g[j, 1] * out[1] + g[j, 2] * out[2]
+            if v < best:
+                best = v
+                bj = j
+        xx = out[0] * out[0] + out[1] * out[1] + out[2] * out[2]
+        if xx - best <= 1e-12:
+            break
+        dx, dy, dz = g[bj, 0] - out[0], g[bj, 1] - out[1], g[bj, 2] - out[2]
+        dd = dx * dx + dy * dy + dz * dz
+        t = min(max((xx - best) / dd, 0.0), 1.0) if dd > 0 else 0.0
+        out[0] += t * dx
+        out[1] += t * dy
+        out[2] += t * dz
+    return math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
+
+
+@njit(cache=True, parallel=True)
+def clearance_many(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi, Dc, exc, pts, search,
+                   use_mesh, Dnone, exc_none):
+    """Clearance of many points; where use_mesh[i] is 0 the surfaces are known to be farther than
+    the nearest sphere surface and are not queried (Dnone, exc_none: no meshes, no excavation)."""
+    out = np.empty(pts.shape[0])
+    near = np.empty(pts.shape[0], np.int64)
+    for i in prange(pts.shape[0]):
+        if use_mesh[i]:
+            c, j, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
+                                      Dc, exc, pts[i, 0], pts[i, 1], pts[i, 2], search, 0.0, None)
+        else:
+            c, j, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
+                                      Dnone, exc_none, pts[i, 0], pts[i, 1], pts[i, 2], search, 0.0, None)
+        out[i] = c
+        near[i] = j
+    return out, near
+
+
+@njit(cache=True, parallel=True)
+def mesh_distance_many(Dc, pts, maxd):
+    """Distance from each point to the nearest mesh of Dc (inf beyond maxd[i])."""
+    out = np.full(pts.shape[0], np.inf)
+    for i in prange(pts.shape[0]):
+        m2 = maxd[i] * maxd[i]
+        for k in range(Dc[12].shape[0]):
+            if not MQ.in_root_box(Dc, k, pts[i, 0], pts[i, 1], pts[i, 2], maxd[i]):
+                continue
+            d2 = MQ.closest_point(Dc, k, pts[i, 0], pts[i, 1], pts[i, 2], m2)[0]
+            if d2 < m2:
+                m2 = d2
+                out[i] = math.sqrt(d2)
+    return out
+
+
+@njit(cache=True, parallel=True)
+def ascend_many(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi, Dc, exc, pts, search,
+                scale, iters):
+    """Local ascent of the clearance from each point: steepest ascent direction (min-norm point of
+    the active constraints' directions), step doubled on success and halved on failure."""
+    res = np.empty(pts.shape[0])
+    pos = pts.copy()
+    near = np.empty(pts.shape[0], np.int64)
+    for i in prange(pts.shape[0]):
+        g = np.empty((32, 3))
+        d = np.empty(3)
+        px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
+        eps = 1e-6 * scale[i]
+        s = 0.1 * scale[i]
+        c, bj, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi, Dc,
+                                   exc, px, py, pz, search, eps + s, g)
+        for it in range(iters):
+            if c == -np.inf or m == 0 or s < 1e-7 * scale[i]:
+                break
+            dl = min_norm_hull(g, m, d)
+            if dl < 1e-9:
+                s *= 0.5  # balanced for this active band: narrow it
+                c, bj, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
+                                           Dc, exc, px, py, pz, search, eps + s, g)
+                continue
+            qx, qy, qz = px + s * d[0] / dl, py + s * d[1] / dl, pz + s * d[2] / dl
+            c2, bj2, m2 = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
+                                          Dc, exc, qx, qy, qz, search, 0.0, None)
+            if c2 > c:
+                px, py, pz, c, bj = qx, qy, qz, c2, bj2
+                s *= 1.5
+            else:
+                s *= 0.5
+            c, bj, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi, Dc,
+                                       exc, px, py, pz, search, eps + s, g)
+        res[i] = c
+        near[i] = bj
+        pos[i, 0], pos[i, 1], pos[i, 2] = px, py, pz
+    return res, pos, near
