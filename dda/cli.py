@@ -16,23 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-EXIT_BAD_INPUT = 2
+from sgim.cli import EXIT_BAD_INPUT, CliError, _progress  # the same CLI conventions as sgim
+
 EXIT_BLOWUP = 3
-
-
-class CliError(Exception):
-    """One-line error for the user (exit status 2)."""
-
-
-def _progress(quiet):
-    if quiet:
-        return None
-    t0 = time.perf_counter()
-
-    def say(msg):
-        print(f"[{time.perf_counter() - t0:7.2f} s] {msg}", file=sys.stderr, flush=True)
-
-    return say
 
 
 def _write_outputs(scene, sim, res, tmp, frames, summary, say):
