@@ -150,42 +150,43 @@ def pocket_spp(ax, ay, az, da, n1x, n1y, n1z, h1, n2x, n2y, n2z, h2, out):
 # ---------------------------------------------------------------------------
 # binary heap (keys float64, values int64)
 
-@njit(cache=True)
-def heap_push(hk, hv, n, key, val):
+@njit(cache=True, error_model="numpy")
+def heap_push(hkv, n, key, val):
+    """Binary heap in one (cap, 2) array: key, value (an index, exact as a float) side by side."""
     i = n
     while i > 0:
         p = (i - 1) >> 1
-        if hk[p] <= key:
+        if hkv[p, 0] <= key:
             break
-        hk[i] = hk[p]
-        hv[i] = hv[p]
+        hkv[i, 0] = hkv[p, 0]
+        hkv[i, 1] = hkv[p, 1]
         i = p
-    hk[i] = key
-    hv[i] = val
+    hkv[i, 0] = key
+    hkv[i, 1] = val
     return n + 1
 
 
-@njit(cache=True)
-def heap_pop(hk, hv, n):
-    v = hv[0]
+@njit(cache=True, error_model="numpy")
+def heap_pop(hkv, n):
+    v = int(hkv[0, 1])
     n -= 1
-    key = hk[n]
-    val = hv[n]
+    key = hkv[n, 0]
+    val = hkv[n, 1]
     i = 0
     while True:
         lft = 2 * i + 1
         if lft >= n:
             break
         m = lft
-        if lft + 1 < n and hk[lft + 1] < hk[lft]:
+        if lft + 1 < n and hkv[lft + 1, 0] < hkv[lft, 0]:
             m = lft + 1
-        if hk[m] >= key:
+        if hkv[m, 0] >= key:
             break
-        hk[i] = hk[m]
-        hv[i] = hv[m]
+        hkv[i, 0] = hkv[m, 0]
+        hkv[i, 1] = hkv[m, 1]
         i = m
-    hk[i] = key
-    hv[i] = val
+    hkv[i, 0] = key
+    hkv[i, 1] = val
     return v, n
 
 
@@ -209,7 +210,7 @@ def _cidx(org, cs, dims, k, a, v):
     return min(max(int(math.floor((v - org[k, a]) / cs[k])), 0), dims[k, a] - 1)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def grid_insert(org, cs, dims, coff, rlo, bdims, boff, head, nxt, bcnt, i, x, y, z, r):
     k = level_of(rlo, r)
     ix = _cidx(org, cs, dims, k, 0, x)
@@ -222,10 +223,11 @@ def grid_insert(org, cs, dims, coff, rlo, bdims, boff, head, nxt, bcnt, i, x, y,
     bcnt[b] += 1
 
 
-@njit(cache=True)
-def grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R,
+@njit(cache=True, error_model="numpy")
+def grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR,
                 px, py, pz, reach, out, cap, skip):
-    """Spheres j != skip with |P - x_j| < reach + r_j, written to out; returns the count (<= cap)."""
+    """Spheres j != skip with |P - x_j| < reach + r_j, written to out; returns the count (<= cap).
+    XR (n,4): centre and radius of each sphere side by side (32 bytes a sphere: one cache line or less)."""
     m = 0
     for k in range(org.shape[0]):
         ext = reach + rmax[k]
@@ -259,10 +261,10 @@ def grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R,
                         j = head[base + ix]
                         while j >= 0:
                             if j != skip:
-                                dx = X[j, 0] - px
-                                dy = X[j, 1] - py
-                                dz = X[j, 2] - pz
-                                lim = reach + R[j]
+                                dx = XR[j, 0] - px
+                                dy = XR[j, 1] - py
+                                dz = XR[j, 2] - pz
+                                lim = reach + XR[j, 3]
                                 if dx * dx + dy * dy + dz * dz < lim * lim and m < cap:
                                     out[m] = j
                                     m += 1
@@ -280,10 +282,10 @@ def grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R,
                                 j = head[base + ix]
                                 while j >= 0:
                                     if j != skip:
-                                        dx = X[j, 0] - px
-                                        dy = X[j, 1] - py
-                                        dz = X[j, 2] - pz
-                                        lim = reach + R[j]
+                                        dx = XR[j, 0] - px
+                                        dy = XR[j, 1] - py
+                                        dz = XR[j, 2] - pz
+                                        lim = reach + XR[j, 3]
                                         if dx * dx + dy * dy + dz * dz < lim * lim and m < cap:
                                             out[m] = j
                                             m += 1
@@ -291,8 +293,8 @@ def grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R,
     return m
 
 
-@njit(cache=True)
-def grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, px, py, pz, r, tol, stamp):
+@njit(cache=True, error_model="numpy")
+def grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, px, py, pz, r, tol, stamp):
     """Does a sphere (P, r) overlap a placed sphere j >= stamp by more than tol * min(r, r_j)?"""
     for k in range(org.shape[0]):
         ext = r + rmax[k]
@@ -310,10 +312,10 @@ def grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R,
                     for ix in range(x0, x1 + 1):
                         j = head[base + ix]
                         while j >= stamp:
-                            dx = X[j, 0] - px
-                            dy = X[j, 1] - py
-                            dz = X[j, 2] - pz
-                            lim = r + R[j] - tol * min(r, R[j])
+                            dx = XR[j, 0] - px
+                            dy = XR[j, 1] - py
+                            dz = XR[j, 2] - pz
+                            lim = r + XR[j, 3] - tol * min(r, XR[j, 3])
                             if dx * dx + dy * dy + dz * dz < lim * lim:
                                 return True
                             j = nxt[j]
@@ -329,10 +331,10 @@ def grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R,
                             for ix in range(max(x0, bx * BLOCK), min(x1, bx * BLOCK + BLOCK - 1) + 1):
                                 j = head[base + ix]
                                 while j >= stamp:
-                                    dx = X[j, 0] - px
-                                    dy = X[j, 1] - py
-                                    dz = X[j, 2] - pz
-                                    lim = r + R[j] - tol * min(r, R[j])
+                                    dx = XR[j, 0] - px
+                                    dy = XR[j, 1] - py
+                                    dz = XR[j, 2] - pz
+                                    lim = r + XR[j, 3] - tol * min(r, XR[j, 3])
                                     if dx * dx + dy * dy + dz * dz < lim * lim:
                                         return True
                                     j = nxt[j]
@@ -450,7 +452,7 @@ def _grow1(a, n, fill):
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff, discs, fseq,
          seeds, seed_r, X0, R0, cap0):
     """Pocket-filling packing.  Returns (X, R, Dist, counters).
@@ -475,6 +477,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
     cap = max(cap0, X0.shape[0] + 16)
     X = np.empty((cap, 3))
     R = np.empty(cap)
+    XR = np.empty((cap, 4))  # X and R side by side for the grid kernels
     DGL = np.zeros(cap)  # bounds of the grading distance of each sphere (mode 2)
     DGH = np.zeros(cap)
     pdl, pdh = 0.0, 0.0
@@ -487,6 +490,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
     for i in range(X0.shape[0]):
         X[n] = X0[i]
         R[n] = R0[i]
+        XR[n, 0], XR[n, 1], XR[n, 2], XR[n, 3] = X0[i, 0], X0[i, 1], X0[i, 2], R0[i]
         if mode == 2:
             DGL[n] = near_distance(Dg, goff, dcen, dnrm, drad, dhalf, X0[i, 0], X0[i, 1], X0[i, 2], dcg)
             DGH[n] = DGL[n] if DGL[n] < dcg else BIG
@@ -517,8 +521,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
     freel = np.empty(ccap, np.int64)
     nfree = 0
     ncand = 0
-    hk = np.empty(ccap)
-    hv = np.empty(ccap, np.int64)
+    hkv = np.empty((ccap, 2))  # the heap: height, candidate
     hn = 0
 
     # pool of radii (mode 1), sorted descending
@@ -542,6 +545,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
     nbx = np.empty((nbcap, 3))
     nbr = np.empty(nbcap)
     nbd = np.empty(nbcap)
+    nbh = np.empty(nbcap, np.int64)
     out = np.empty((2, 3))
     out2 = np.empty((2, 3))
     pl = np.empty((6 + 64 + 256, 4))  # planes near the new sphere: nx ny nz h (kept side: n.x >= h)
@@ -563,10 +567,10 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
         csup[c, 2] = SUP_NONE
         # seeds go by the height of the floor under them (not of their centre: no sifting by
         # radius) and before the pockets at the same height
-        hn = heap_push(hk, hv, hn, seeds[s, 2] - seed_r[s] - 1e-9 * (abs(seeds[s, 2]) + seed_r[s]), c)
+        hn = heap_push(hkv, hn, seeds[s, 2] - seed_r[s] - 1e-9 * (abs(seeds[s, 2]) + seed_r[s]), c)
 
     while hn > 0:
-        c, hn = heap_pop(hk, hv, hn)
+        c, hn = heap_pop(hkv, hn)
         freel[nfree] = c
         nfree += 1
         cnt[0] += 1
@@ -579,7 +583,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
         if mode != 0 and not seed:
             # a pocket that the spheres placed since it was made fill for its own radius is gone
             # for the others too (most pops end here, without trying other radii)
-            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, cpos[c, 0], cpos[c, 1],
+            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, cpos[c, 0], cpos[c, 1],
                              cpos[c, 2], r0, tol, cstamp[c]):
                 cnt[3] += 1
                 continue
@@ -637,7 +641,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                                                    gs, gnx, gny):
                     continue
             stamp = 0 if moved else cstamp[c]
-            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, px, py, pz, rr,
+            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, px, py, pz, rr,
                              tol, stamp):
                 continue
             placed = True
@@ -662,6 +666,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
         if n == cap:
             cap = cap + cap // 2 + 16
             X = _grow2(X, cap)
+            XR = _grow2(XR, cap)
             R = _grow1(R, cap, 0.0)
             DGL = _grow1(DGL, cap, 0.0)
             DGH = _grow1(DGH, cap, 0.0)
@@ -672,6 +677,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
         n += 1
         X[i, 0], X[i, 1], X[i, 2] = px, py, pz
         R[i] = rr
+        XR[i, 0], XR[i, 1], XR[i, 2], XR[i, 3] = px, py, pz, rr
         if mode == 2:
             if not seed:
                 ifac += 1
@@ -696,12 +702,12 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             rn = pool[npool - 1]
         else:
             rn = grade_radius(DGL[i], rf, rc, df, dcg) * (1.0 - spread)
-        m = grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, X, R, px, py, pz,
+        m = grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, px, py, pz,
                         rr + 2.0 * rn, nb, nbcap, i)
         # nearest first: the closest neighbours exclude the most pocket directions
         for a in range(m):
             j = nb[a]
-            nbd[a] = (X[j, 0] - px) ** 2 + (X[j, 1] - py) ** 2 + (X[j, 2] - pz) ** 2 - (R[j] + rr) ** 2
+            nbd[a] = (XR[j, 0] - px) ** 2 + (XR[j, 1] - py) ** 2 + (XR[j, 2] - pz) ** 2 - (XR[j, 3] + rr) ** 2
         for a in range(1, m):
             j = nb[a]
             dj = nbd[a]
@@ -714,8 +720,8 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             nb[q] = j
         for a in range(m):
             j = nb[a]
-            nbx[a, 0], nbx[a, 1], nbx[a, 2] = X[j, 0], X[j, 1], X[j, 2]
-            nbr[a] = R[j]
+            nbx[a, 0], nbx[a, 1], nbx[a, 2] = XR[j, 0], XR[j, 1], XR[j, 2]
+            nbr[a] = XR[j, 3]
         # planes near the new sphere
         npl = 0
         for w in range(6):
@@ -776,12 +782,22 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
 
         # (S, A, B)
         zcut = pz - DEEP * (rr + rn)
+        # neighbours above zcut, in order: a neighbour below it pairs only with these
+        nhigh = 0
         for a in range(m):
+            if nbx[a, 2] >= zcut:
+                nbh[nhigh] = a
+                nhigh += 1
+        hp = 0  # nbh[hp:] are the neighbours above zcut with an index > a
+        for a in range(m):
+            while hp < nhigh and nbh[hp] <= a:
+                hp += 1
             ax_, ay_, az_, ra = nbx[a, 0], nbx[a, 1], nbx[a, 2], nbr[a]
-            for b in range(a + 1, m):
+            alow = az_ < zcut
+            nbt = (nhigh - hp) if alow else (m - a - 1)
+            for t in range(nbt):
+                b = nbh[hp + t] if alow else a + 1 + t
                 bx_, by_, bz_, rb = nbx[b, 0], nbx[b, 1], nbx[b, 2], nbr[b]
-                if az_ < zcut and bz_ < zcut:
-                    continue
                 lim = ra + rb + 2.0 * rn
                 if (ax_ - bx_) ** 2 + (ay_ - by_) ** 2 + (az_ - bz_) ** 2 >= lim * lim:
                     continue
@@ -805,15 +821,14 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                             csup = _grow2(csup, ccap)
                             cpl = _grow2(cpl, ccap)
                             freel = _grow1(freel, ccap, 0)
-                            hk = _grow1(hk, ccap, 0.0)
-                            hv = _grow1(hv, ccap, 0)
+                            hkv = _grow2(hkv, ccap)
                         cc = ncand
                         ncand += 1
                     cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
                     crad[cc] = rn
                     cstamp[cc] = n
                     csup[cc, 0], csup[cc, 1], csup[cc, 2] = i, nb[a], nb[b]
-                    hn = heap_push(hk, hv, hn, qz, cc)
+                    hn = heap_push(hkv, hn, qz, cc)
                     cnt[2] += 1
         # (S, A, plane) and (S, plane, plane)
         for p in range(npl):
@@ -854,8 +869,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                             csup = _grow2(csup, ccap)
                             cpl = _grow2(cpl, ccap)
                             freel = _grow1(freel, ccap, 0)
-                            hk = _grow1(hk, ccap, 0.0)
-                            hv = _grow1(hv, ccap, 0)
+                            hkv = _grow2(hkv, ccap)
                         cc = ncand
                         ncand += 1
                     cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
@@ -865,7 +879,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     csup[cc, 2] = plid[p]
                     if plid[p] == SUP_PLANE0:
                         cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
-                    hn = heap_push(hk, hv, hn, qz, cc)
+                    hn = heap_push(hkv, hn, qz, cc)
                     cnt[2] += 1
             for p2 in range(p + 1, npl):
                 if (plid[p] == SUP_PLANE0 and plid[p2] == SUP_PLANE0) or plown[p] >= 0 or plown[p2] >= 0:
@@ -903,8 +917,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                             csup = _grow2(csup, ccap)
                             cpl = _grow2(cpl, ccap)
                             freel = _grow1(freel, ccap, 0)
-                            hk = _grow1(hk, ccap, 0.0)
-                            hv = _grow1(hv, ccap, 0)
+                            hkv = _grow2(hkv, ccap)
                         cc = ncand
                         ncand += 1
                     cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
@@ -917,7 +930,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     csup[cc, 0], csup[cc, 1], csup[cc, 2] = i, w1, w2
                     if w2 == SUP_PLANE0:
                         cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
-                    hn = heap_push(hk, hv, hn, qz, cc)
+                    hn = heap_push(hkv, hn, qz, cc)
                     cnt[2] += 1
     cnt[5] = n_initial
     cnt[6] = npool
@@ -985,7 +998,7 @@ def _refine(kind, sx, sy, sz, ds, ax, ay, az, da, mx, my, mz, hm, nx, ny, nz, h0
     return False, qx, qy, qz, nx, ny, nz, h0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _support_plane(sup, cpl, c, k, lo, hi):
     """Plane (n, h) of support code sup (a wall or stored plane k)."""
     if sup == SUP_PLANE0 or sup == SUP_PLANE1:
@@ -1001,7 +1014,7 @@ def _support_plane(sup, cpl, c, k, lo, hi):
     return n[0], n[1], n[2], -hi[ax]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _reposition(csup, cpl, c, X, R, lo, hi, r, cpos, out):
     """Position of candidate c's pocket for radius r (the solution nearest its stored position),
     written to out[0]; False when the pocket does not exist for r."""
