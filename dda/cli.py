@@ -16,7 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import EXIT_BAD_INPUT, CliError, _progress  # the same CLI conventions as sgim
+from sgim.cli import EXIT_BAD_INPUT, CliError, _progress, replace_folder  # the same CLI conventions as sgim
+
+from .results import ENERGY_COLUMNS
 
 EXIT_BLOWUP = 3
 
@@ -177,17 +179,10 @@ def _run_spheres(scene, out, args, say, t0):
             "moving_blocks": _n_moving(scene), "dt": sim.dt,
             "dt_critical": sim.dt_crit, "steps": sim.steps, "time": sim.time,
             "wall_s": round(time.perf_counter() - t0, 3),
-            "energy_final": dict(zip(("kinetic", "potential", "elastic", "friction", "damping", "local_damping",
-                                      "balance_error"), [float(x) for x in e])),
+            "energy_final": dict(zip(ENERGY_COLUMNS, [float(x) for x in e])),
         }
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
-        if out.exists():
-            old = out.with_name(f".{out.name}.old{os.getpid()}")
-            os.replace(out, old)
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
+        replace_folder(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -236,18 +231,11 @@ def cmd_run(args):
             "scene": scene.name, "scene_path": str(scene.path), "status": status, "message": message,
             "blocks": bs.n_blocks, "moving": int(len(sim.active)), "dt": sim.dt, "dt_critical": sim.dt_crit,
             "steps": sim.steps, "time": sim.time, "wall_s": round(time.perf_counter() - t0, 3),
-            "energy_final": dict(zip(("kinetic", "potential", "elastic", "friction", "damping", "local_damping",
-                                      "balance_error"), [float(x) for x in res.energies[-1]])),
+            "energy_final": dict(zip(ENERGY_COLUMNS, [float(x) for x in res.energies[-1]])),
             "contacts_final": int(sim.stats[5]), "points_final": int(sim.stats[6]),
         }
         _write_outputs(scene, sim, res, tmp, frames, summary, say)
-        if out.exists():
-            old = out.with_name(f".{out.name}.old{os.getpid()}")
-            os.replace(out, old)
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
+        replace_folder(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -46,9 +46,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _spheres as _sp
+from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
 from .simulation import BlowUpError, ContactLaw
-
-ENERGY_COLUMNS = ("kinetic", "potential", "elastic", "friction", "damping", "local_damping", "balance_error")
 
 
 @dataclass

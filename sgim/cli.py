@@ -78,13 +78,7 @@ def cmd_build(args):
         info = summary(model, timer.t)
         info["timings_s"]["total"] = round(time.perf_counter() - t0, 4)
         (tmp / "summary.json").write_text(json.dumps(info, indent=2))
-        if out.exists():
-            old = out.with_name(f".{out.name}.old{os.getpid()}")
-            os.replace(out, old)
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
+        replace_folder(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -120,7 +114,7 @@ def cmd_dfn(args):
         info = {"scene": scene.name, "scene_path": str(scene.path), **net.summary(),
                 "seconds": round(time.perf_counter() - t0, 4)}
         (tmp / "summary.json").write_text(json.dumps(info, indent=2))
-        _replace_folder(tmp, out)
+        replace_folder(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -133,7 +127,7 @@ def cmd_dfn(args):
     return 0
 
 
-def _replace_folder(tmp, out):
+def replace_folder(tmp, out):
     """Rename the finished folder ``tmp`` to ``out``, replacing an existing ``out``."""
     if out.exists():
         old = out.with_name(f".{out.name}.old{os.getpid()}")

@@ -771,7 +771,10 @@ def network_for(scene, progress=None):
     spec = getattr(scene, "dfn", None)
     if spec is None:
         return None
-    return generate_network(spec, progress)
+    net = getattr(scene, "_dfn_network", None)
+    if net is None:
+        net = scene._dfn_network = generate_network(spec, progress)
+    return net
 
 
 def append_discs(discs, net):
