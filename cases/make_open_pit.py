@@ -174,13 +174,22 @@ def toml_text():
         "",
     ]
     for d in discontinuities():
-        lines += ["[[discontinuity]]", f'name = "{d["name"]}"', f"centre = {d['centre']}",
-                  f"dip = {d['dip']}", f"dip_direction = {d['dip_direction']}", f"radius = {d['radius']}",
-                  f"thickness = {d['thickness']}", ""]
-    lines += ["[[excavation]]", 'name = "pit and terrain"', 'rule = "paper"', "points = ["]
-    lines += [f"  [{x:g}, {y:g}, {z:g}]," for x, y, z in points()]
-    lines += ["]", ""]
+        lines += disc_lines(d)
+    lines += excavation_lines()
     return "\n".join(lines)
+
+
+def disc_lines(d):
+    """TOML lines of one [[discontinuity]] disc."""
+    return ["[[discontinuity]]", f'name = "{d["name"]}"', f"centre = {d['centre']}",
+            f"dip = {d['dip']}", f"dip_direction = {d['dip_direction']}", f"radius = {d['radius']}",
+            f"thickness = {d['thickness']}", ""]
+
+
+def excavation_lines():
+    """TOML lines of the pit-and-terrain [[excavation]] surface."""
+    return ["[[excavation]]", 'name = "pit and terrain"', 'rule = "paper"', "points = [",
+            *(f"  [{x:g}, {y:g}, {z:g}]," for x, y, z in points()), "]", ""]
 
 
 def main():

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cases.make_open_pit import BOX, discontinuities, points
+from cases.make_open_pit import BOX, disc_lines, discontinuities, excavation_lines
 
 SETS = (
     # name, dip, dip direction, kappa, P32 (1/m)
@@ -64,12 +64,8 @@ def toml_text():
                   *(f'{k} = "{v}"' if isinstance(v, str) else f"{k} = {v}" for k, v in RADIUS.items()), ""]
     for d in discontinuities():
         if d["thickness"] > 0:
-            lines += ["[[discontinuity]]", f'name = "{d["name"]}"', f"centre = {d['centre']}", f"dip = {d['dip']}",
-                      f"dip_direction = {d['dip_direction']}", f"radius = {d['radius']}",
-                      f"thickness = {d['thickness']}", ""]
-    lines += ["[[excavation]]", 'name = "pit and terrain"', 'rule = "paper"', "points = ["]
-    lines += [f"  [{x:g}, {y:g}, {z:g}]," for x, y, z in points()]
-    lines += ["]", ""]
+            lines += disc_lines(d)
+    lines += excavation_lines()
     return "\n".join(lines)
 
 

@@ -119,20 +119,8 @@ class DDAScene:
     def build(self):
         """BlockSystem and Simulation of the scene."""
         from .simulation import Simulation
-        from .system import BlockSystem
 
-        bs = BlockSystem()
-        for spec in self.blocks:
-            m = self.materials.get(spec.material) or Material(spec.material)
-            i = bs.add_block(spec, density=m.density, E=m.E, nu=m.nu)
-            f = getattr(spec, "body_force", None)
-            if f is not None and np.any(np.asarray(f) != 0):
-                bs.add_body_load(i, f)
-        for i, point, force in self.loads:
-            if point is None:
-                bs.add_body_load(i, force)
-            else:
-                bs.add_point_load(i, point, force)
+        bs = self.block_system()
         sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
                          local_damping=self.local_damping, pair_laws=self.pair_laws, **self.sleep)
         return bs, sim
