@@ -25,6 +25,9 @@ written. Keys::
                    relative to the scene; density = 2600, fixed = ["z>2.6"]
                    (regions of fixed spheres), bond_young (Pa) = 1e9 or bond_kn / bond_ks (N/m), bond_shear_ratio
                    = 0.4, bond_tensile / bond_shear (Pa, default unbreakable), bond_damping, bond_radius_factor = 1;
+                   fixed_below = [[dip, dip_direction, x, y, z], ...] (spheres below any of these planes are
+                   fixed), smooth_joints = true (pairs the model cuts by a zero-thickness joint slide on the joint
+                   plane: contact normal = joint normal), joint_friction (deg, default [contact] friction);
                    only the model's bonded pairs get bonds; [contact] is the sphere contact law (sphere-sphere,
                    sphere-block and, with [[contact_pair]], block-block); blocks are fixed walls or moving
                    blocks stepped in one loop with the spheres (see dda/spheres.py, dda/_coupled.py)
@@ -47,7 +50,7 @@ OUTPUT_FORMATS = ("npz", "csv", "vtu", "png")
 TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact_pair", "block", "generate",
             "output", "render", "load", "spheres"}
 SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", "bond_shear_ratio", "bond_tensile",
-               "bond_shear", "bond_damping", "bond_radius_factor"}
+               "bond_shear", "bond_damping", "bond_radius_factor", "joint_friction", "smooth_joints", "fixed_below"}
 LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
 
 
@@ -89,14 +92,25 @@ class DDAScene:
 
         sp = self.spheres
         ss = load_model(sp["model"], density=sp["density"], bonds=sp["bonds"])
-        for axis, sign, value in sp["fixed"]:
-            ss.fixed |= sign * (ss.centers[:, axis] - value) > 0
+        ss.fixed |= self.fixed_spheres(ss.centers)
         walls = self.blocks
         if not all(getattr(b, "fixed", False) for b in self.blocks):
             walls = self.block_system()  # moving blocks: one coupled loop with the spheres
         sim = SphereSimulation(ss, self.law, walls=walls, gravity=self.gravity, dt=self.dt, safety=self.safety,
                                local_damping=self.local_damping, pair_laws=self.pair_laws)
         return ss, sim
+
+    def fixed_spheres(self, centers):
+        """The [spheres] fixed flags of spheres at `centers`: inside a fixed region ("z>2.6") or below a
+        fixed_below plane (dip, dip direction, a point of the plane)."""
+        sp = self.spheres
+        c = np.asarray(centers, float)
+        fixed = np.zeros(len(c), bool)
+        for axis, sign, value in sp["fixed"]:
+            fixed |= sign * (c[:, axis] - value) > 0
+        for normal, point in sp.get("fixed_below", ()):
+            fixed |= (c - point) @ normal < 0
+        return fixed
 
     def block_system(self):
         """BlockSystem of the scene's blocks (materials, body and point loads)."""
@@ -175,7 +189,21 @@ def _read_spheres(rd, data, path):
         except (OSError, ValueError, KeyError) as exc:
             rd.err("spheres.model", name, f"cannot read the model ({str(exc).splitlines()[0]})")
     density = rd.number(st, "density", "spheres.density", default=2600.0, positive=True)
-    return {"model": model, "path": str(mp), "density": density, "bonds": law, "fixed": regions}
+    below = []
+    if "fixed_below" in st:
+        from sgim.geometry import dip_to_normal
+
+        rows = rd.matrix(st, "fixed_below", "spheres.fixed_below", 5)
+        for row in rows:
+            if not (0.0 <= row[0] <= 90.0 and -360.0 <= row[1] <= 360.0):
+                rd.err("spheres.fixed_below", row.tolist(), "dip must be 0..90 and dip direction -360..360 deg")
+            below.append((np.asarray(dip_to_normal(row[0], row[1]), float), np.asarray(row[2:5], float)))
+    out = {"model": model, "path": str(mp), "density": density, "bonds": law, "fixed": regions,
+           "fixed_below": below,
+           "smooth_joints": rd.boolean(st, "smooth_joints", "spheres.smooth_joints", True)}
+    if "joint_friction" in st:
+        out["joint_friction"] = rd.number(st, "joint_friction", "spheres.joint_friction", lo=0.0, hi=89.9)
+    return out
 
 
 def _law(rd, tab, key, base=None):

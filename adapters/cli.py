@@ -1,0 +1,101 @@
+"""Command line: ``adapters export SOURCE --to yade|liggghts|pfc-text|vtu -o DECK`` and
+``adapters run DECK [--np N] [--timeout S] [-o RESULT] [--in-house]``.
+
+Bad input (a scene, model, deck or option) prints one line and exits with status 2, leaving no deck behind.
+An engine that is missing, fails or runs out of time prints its one-line reason and exits with status 3;
+what the run wrote before it stopped is kept in the result folder, marked incomplete in result.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from sgim.cli import EXIT_BAD_INPUT, CliError, _progress
+
+EXIT_ENGINE = 3
+
+
+def cmd_export(args):
+    from .deck import export
+
+    say = _progress(args.quiet)
+    overrides = {"duration": args.duration, "dt": args.dt, "record_every": args.record_every}
+    info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say)
+    if args.json:
+        print(json.dumps(info, indent=2))
+    return 0
+
+
+def cmd_run(args):
+    from pathlib import Path
+
+    from .deck import read_deck, run
+
+    say = _progress(args.quiet)
+    if args.in_house:
+        from .inhouse import run_inhouse
+        from .spec import SphereRun
+
+        read_deck(args.deck)
+        path = Path(args.deck) / "run.npz"
+        if not path.is_file():
+            raise CliError(f"{args.deck}: no run.npz (a sphere deck is needed for --in-house)")
+        res = run_inhouse(SphereRun.load(path), out=args.output or Path(args.deck) / "result-dda", progress=say)
+    else:
+        res = run(args.deck, out=args.output, np=args.np, timeout=args.timeout, progress=say)
+    summary = {"engine": res.engine, "status": res.status, "steps": res.steps, "wall_s": round(res.wall_s, 3),
+               "spheres": res.n, "bonds_intact": int(res.bond_intact.sum()), "bonds": int(len(res.bond_intact)),
+               "particle_steps_per_s": round(res.n * res.steps / res.wall_s) if res.wall_s > 0 else None}
+    print(json.dumps(summary) if args.json else
+          "  ".join(f"{k} {v}" for k, v in summary.items()))
+    return 0
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="adapters", description="Export sphere models and block scenes to YADE and "
+                                 "LIGGGHTS decks, run them, read their results back.")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    p = sub.add_parser("export", help="write a deck folder for an engine (or a text / VTU export)")
+    p.add_argument("source", help="DDA scene (.toml with [spheres], or blocks for yade), sgim scene .toml, "
+                                  "model.npz or run.npz")
+    p.add_argument("--to", required=True, help="yade | liggghts | pfc-text | vtu")
+    p.add_argument("-o", "--output", required=True, help="deck folder (replaced when it exists)")
+    p.add_argument("--variant", help="liggghts: bonds (default) | sjkr | clumps")
+    p.add_argument("--duration", type=float, help="run length [s] (overrides the scene)")
+    p.add_argument("--dt", type=float, help="time step [s] (overrides the scene)")
+    p.add_argument("--record-every", type=float, help="record interval [s]")
+    p.add_argument("--json", action="store_true", help="print deck.json")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_export)
+    p = sub.add_parser("run", help="run a deck folder with its engine")
+    p.add_argument("deck")
+    p.add_argument("--np", type=int, default=1, help="MPI ranks (liggghts) or threads (yade -j)")
+    p.add_argument("--timeout", type=float, help="time limit [s]; partial results are kept, marked incomplete")
+    p.add_argument("-o", "--output", help="result folder (default DECK/result)")
+    p.add_argument("--in-house", action="store_true", help="run the deck's run.npz with the in-house engine")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_run)
+    args = ap.parse_args(argv)
+    from sgim.scene import SceneError
+
+    from .deck import DeckError
+    from .process import EngineError
+    from .spec import SpecError
+
+    try:
+        return args.func(args)
+    except (SceneError, DeckError, SpecError, CliError) as exc:
+        print(f"adapters: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except EngineError as exc:
+        print(f"adapters: error: {exc}", file=sys.stderr)
+        if exc.result is not None:
+            print(f"adapters: partial results kept ({exc.result.status}, {len(exc.result.time)} records)",
+                  file=sys.stderr)
+        return EXIT_ENGINE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

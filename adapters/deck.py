@@ -1,0 +1,234 @@
+"""Deck folders: export a model or scene for an engine, and run a deck with the engine that wrote it.
+
+``export(source, to, out)`` reads `source`:
+
+- a DDA scene (.toml with [simulation]) with [spheres]: the run's settings come from the scene
+  (adapters.spec.from_scene); a DDA scene with blocks only: a YADE Polyhedra deck (``to="yade"``);
+- an sgim scene (.toml with [domain]): the model is built in memory and run with default settings;
+- an sgim ``model.npz``: run with default settings;
+- a ``run.npz`` (a deck's SphereRun): as it is.
+
+``overrides`` (duration, dt, record_every) shorten or change the run. ``to`` is one of:
+
+=========  ======================================================================
+yade       DECK/script.py + run.npz (JCFpm bonded spheres), or a Polyhedra deck
+liggghts   DECK/data + DECK/in + run.npz (variant: bonds, sjkr, clumps)
+pfc-text   DECK/balls.txt + DECK/contacts.txt (sgim's PFC-style text lists)
+vtu        DECK/spheres.vtu (points: radius, colour, fixed, bond count) + bonds.vtu (lines)
+=========  ======================================================================
+
+Every deck has ``deck.json`` (engine, variant, source, counts, steps, dt, the files). The folder is assembled
+under a temporary name and renamed into place: a failed export leaves nothing behind.
+``run(deck, out)`` runs a yade / liggghts deck (adapters.yade, adapters.liggghts) and returns the RunResult
+it saved into `out` (default DECK/result).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .process import EngineError
+from .spec import SpecError, SphereRun, from_model, from_scene
+
+TARGETS = ("yade", "liggghts", "pfc-text", "vtu")
+RUNNABLE = ("yade", "yade-polyhedra", "liggghts")
+VARIANTS = {"liggghts": ("bonds", "sjkr", "clumps"), "yade": ("jcfpm",)}
+
+
+class DeckError(ValueError):
+    """A source, target or deck that cannot be exported or run (one line for the user)."""
+
+
+def _toml_kind(path):
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return "dda"  # let the scene loader report the problem with its own line
+    if "simulation" in data:
+        return "dda-spheres" if "spheres" in data else "dda-blocks"
+    return "sgim"
+
+
+def load_source(source, overrides=None):
+    """(kind, SphereRun or None, SphereModel or None) of `source`; kind: "spheres" or "blocks"."""
+    from sgim.model import SphereModel
+
+    path = Path(source)
+    if not path.is_file():
+        raise DeckError(f"{path}: no such file")
+    ov = {k: v for k, v in (overrides or {}).items() if v is not None}
+    model = None
+    if path.suffix.lower() == ".toml":
+        kind = _toml_kind(path)
+        if kind == "dda-blocks":
+            return "blocks", None, None
+        if kind == "dda-spheres":
+            run = from_scene(path)
+            model = _scene_model(path)
+        else:
+            from sgim.build import build_model
+            from sgim.scene import load_scene
+
+            model = build_model(load_scene(path))
+            run = from_model(model, source=str(path), **_run_kw(ov))
+    else:
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                is_run = "header" in z.files
+        except (OSError, ValueError) as exc:
+            raise DeckError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from None
+        if is_run:
+            run = SphereRun.load(path)
+        else:
+            try:
+                model = SphereModel.load(path)
+            except (OSError, ValueError, KeyError) as exc:
+                raise DeckError(f"{path}: cannot read the model ({str(exc).splitlines()[0]})") from None
+            run = from_model(model, source=str(path), **_run_kw(ov))
+    _apply_overrides(run, ov, path)
+    return "spheres", run, model
+
+
+def _scene_model(path):
+    from dda.scene import load_scene
+
+    return load_scene(path).spheres["model"]
+
+
+def _run_kw(ov):
+    return {k: ov[k] for k in ("duration", "dt", "record_every") if k in ov}
+
+
+def _apply_overrides(run, ov, path):
+    for key in ("duration", "dt", "record_every"):
+        if key in ov:
+            val = float(ov[key])
+            if not val > 0:
+                raise DeckError(f"{path}: --{key.replace('_', '-')} must be > 0 (got {ov[key]!r})")
+            setattr(run, key, val)
+    if "duration" in ov and "record_every" not in ov:
+        run.record_every = run.duration / 100 if run.record_every > run.duration else run.record_every
+    run.record_every = min(run.record_every, run.duration)
+
+
+def export(source, to, out, variant=None, overrides=None, progress=None):
+    """Write the deck folder `out` for engine/format `to` from `source`; returns its deck.json dict."""
+    from sgim.cli import replace_folder
+
+    if to not in TARGETS:
+        raise DeckError(f"--to: unknown target {to!r} (choose from {', '.join(TARGETS)})")
+    if variant is not None and variant not in VARIANTS.get(to, ()):
+        raise DeckError(f"--variant: {variant!r} is not a {to} variant "
+                        f"(choose from {', '.join(VARIANTS.get(to, ())) or 'none'})")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise DeckError(f"{out}: output exists and is not a folder")
+    try:
+        kind, run, model = load_source(source, overrides)
+    except SpecError as exc:
+        raise DeckError(str(exc)) from None
+    if kind == "blocks" and to != "yade":
+        raise DeckError(f"{source}: a block scene (no [spheres]) exports to yade (Polyhedra) only, not {to}")
+    if kind == "spheres" and run.n == 0:
+        raise DeckError(f"{source}: the model has no spheres")
+    if to == "pfc-text" and model is None:
+        raise DeckError(f"{source}: pfc-text needs an sgim model or scene (a run.npz has no model)")
+    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        info = {"engine": to, "variant": variant, "source": str(source)}
+        if kind == "blocks":
+            from .yade_poly import write_polyhedra_deck
+
+            info["engine"] = "yade-polyhedra"
+            info.update(write_polyhedra_deck(source, tmp, **(overrides_for_blocks(overrides))) or {})
+        else:
+            info.update(name=run.name, n=int(run.n), n_bonds=int(run.n_bonds), n_joints=int(len(run.joint_i)),
+                        steps=int(run.steps), dt=float(run.dt), record_steps=int(run.record_steps),
+                        duration=float(run.duration))
+            if to in ("yade", "liggghts"):
+                run.save(tmp / "run.npz")
+                if to == "yade":
+                    from .yade import write_deck
+                    info.update(write_deck(run, tmp) or {})
+                else:
+                    from .liggghts import write_deck
+                    info.update(write_deck(run, tmp, variant=variant or "bonds") or {})
+                    info["variant"] = variant or "bonds"
+            elif to == "pfc-text":
+                model.save_text(tmp / "balls.txt", tmp / "contacts.txt")
+            else:
+                write_vtu(run, tmp)
+        info["files"] = sorted(p.name for p in tmp.iterdir())
+        (tmp / "deck.json").write_text(json.dumps(info, indent=2))
+        replace_folder(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if progress:
+        progress(f"deck       {out}: {info['engine']} ({', '.join(info['files'])})")
+    return info
+
+
+def overrides_for_blocks(overrides):
+    return {k: v for k, v in (overrides or {}).items() if k in ("duration", "dt") and v is not None}
+
+
+def write_vtu(run: SphereRun, folder):
+    """spheres.vtu (vertex cells: radius, colour, fixed, intact-bond count) and bonds.vtu (one line per bond)."""
+    import meshio
+
+    from sgim.model import atomic_path
+
+    n = run.n
+    nb = np.bincount(np.r_[run.bond_i, run.bond_j].astype(np.int64), minlength=n)
+    pts = meshio.Mesh(run.centers, [("vertex", np.arange(n, dtype=np.int64).reshape(-1, 1))],
+                      point_data={"radius": run.radii, "colour": run.colour.astype(np.int32),
+                                  "fixed": run.fixed.astype(np.int32), "bonds": nb.astype(np.int32)})
+    lines = meshio.Mesh(run.centers, [("line", np.c_[run.bond_i, run.bond_j].astype(np.int64))],
+                        cell_data={"kn": [run.bond_kn], "tensile_force": [np.where(np.isfinite(run.bond_ft),
+                                                                                    run.bond_ft, -1.0)]})
+    for name, mesh in (("spheres.vtu", pts), ("bonds.vtu", lines)):
+        with atomic_path(Path(folder) / name) as tmp:
+            meshio.write(tmp, mesh, file_format="vtu", binary=True, compression=None)
+
+
+def read_deck(deck):
+    deck = Path(deck)
+    try:
+        info = json.loads((deck / "deck.json").read_text())
+    except (OSError, ValueError):
+        raise DeckError(f"{deck}: not a deck folder (no readable deck.json; write one with `adapters export`)") \
+            from None
+    if info.get("engine") not in RUNNABLE:
+        raise DeckError(f"{deck}/deck.json: engine {info.get('engine')!r} is not runnable "
+                        f"(runnable decks: {', '.join(RUNNABLE)})")
+    return info
+
+
+def run(deck, out=None, np=1, timeout=None, progress=None):
+    """Run the deck folder with its engine; the RunResult is saved into `out` (default DECK/result)."""
+    deck = Path(deck)
+    info = read_deck(deck)
+    if not (isinstance(np, int) and np >= 1):
+        raise DeckError(f"--np must be a positive integer (got {np!r})")
+    if timeout is not None and not timeout > 0:
+        raise DeckError(f"--timeout must be > 0 seconds (got {timeout!r})")
+    out = Path(out) if out is not None else deck / "result"
+    engine = info["engine"]
+    if engine == "yade":
+        from .yade import run_deck
+    elif engine == "yade-polyhedra":
+        from .yade_poly import run_polyhedra_deck as run_deck
+    else:
+        from .liggghts import run_deck
+    return run_deck(deck, out, np=np, timeout=timeout, progress=progress)
+
+
+__all__ = ["export", "run", "load_source", "read_deck", "write_vtu", "DeckError", "EngineError", "TARGETS"]

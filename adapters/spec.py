@@ -1,0 +1,255 @@
+"""SphereRun: the engine-neutral description of one bonded-sphere run, the common input of every deck.
+
+A SphereRun holds, as plain arrays, everything an engine needs to run an sgim model (model.npz) the same way
+in-house (dda.spheres), in YADE or in LIGGGHTS:
+
+- spheres: ``centers`` (n, 3), ``radii``, ``colour`` (sgim colour code), ``fixed`` (n,) bool, ``density``;
+- bonds: only the pairs the model marks ``bonded``: ``bond_i < bond_j``, rest length ``bond_len0``, normal and
+  shear stiffness ``bond_kn`` / ``bond_ks`` [N/m], breaking forces ``bond_ft`` (tension) / ``bond_fs`` (shear)
+  [N] (inf: unbreakable); the stiffness and strength follow dda.spheres.BondLaw (bond area pi (f min r)^2,
+  kn = E A / L0);
+- joints: the touching pairs the model marks cut by a zero-thickness discontinuity (a disc or a triangulated
+  surface without thickness): ``joint_i < joint_j``, ``joint_disc`` (the discontinuity index) and
+  ``joint_normal`` (n, 3): the discontinuity's unit normal at the pair, signed to point from sphere i to
+  sphere j. With ``smooth_joints`` these pairs are smooth joints (contact normal = joint normal, friction
+  ``joint_friction_deg``); pairs cut by a fault (thickness > 0) are plain frictional contacts;
+- the contact law of every unbonded contact: ``kn``, ``ks`` [N/m], ``friction_deg``, ``damping`` (ratio of
+  critical, viscous), and the run: ``gravity``, ``dt`` (one step for every engine), ``duration``,
+  ``record_every``, ``local_damping`` (Cundall's non-viscous damping, as YADE's NewtonIntegrator.damping).
+
+Build one from a DDA scene with [spheres] (``from_scene``) or from a model with run settings
+(``from_model``); ``save`` / ``load`` write the arrays to one npz (``run.npz`` of a deck folder) and the
+scalars to its JSON header.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+ARRAYS = ("centers", "radii", "colour", "fixed", "bond_i", "bond_j", "bond_len0", "bond_kn", "bond_ks", "bond_ft",
+          "bond_fs", "joint_i", "joint_j", "joint_disc", "joint_normal", "cut_i", "cut_j", "gravity")
+
+
+class SpecError(ValueError):
+    """A model or scene that no engine can run (one line for the user)."""
+
+
+@dataclass
+class SphereRun:
+    name: str
+    centers: np.ndarray
+    radii: np.ndarray
+    colour: np.ndarray
+    fixed: np.ndarray
+    density: float
+    bond_i: np.ndarray
+    bond_j: np.ndarray
+    bond_len0: np.ndarray
+    bond_kn: np.ndarray
+    bond_ks: np.ndarray
+    bond_ft: np.ndarray
+    bond_fs: np.ndarray
+    joint_i: np.ndarray
+    joint_j: np.ndarray
+    joint_disc: np.ndarray
+    joint_normal: np.ndarray
+    cut_i: np.ndarray
+    cut_j: np.ndarray
+    kn: float
+    ks: float
+    friction_deg: float
+    damping: float
+    joint_friction_deg: float
+    smooth_joints: bool
+    gravity: np.ndarray
+    dt: float
+    duration: float
+    record_every: float
+    local_damping: float
+    source: str = ""
+    extra: dict = field(default_factory=dict)  # engine-specific settings (e.g. liggghts bond breakage check)
+
+    @property
+    def n(self):
+        return len(self.radii)
+
+    @property
+    def n_bonds(self):
+        return len(self.bond_i)
+
+    @property
+    def steps(self):
+        return max(1, int(round(self.duration / self.dt)))
+
+    @property
+    def record_steps(self):
+        return max(1, int(round(self.record_every / self.dt)))
+
+    def scalars(self):
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ARRAYS}
+
+    # -- files ---------------------------------------------------------------
+    def save(self, path):
+        """One npz: the arrays plus a JSON string ``header`` with the scalars."""
+        from sgim.model import atomic_path
+
+        data = {k: np.asarray(getattr(self, k)) for k in ARRAYS}
+        data["header"] = np.array(json.dumps(self.scalars()))
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **data)
+
+    @classmethod
+    def load(cls, path):
+        with np.load(path, allow_pickle=False) as z:
+            kw = {k: z[k] for k in ARRAYS}
+            kw.update(json.loads(str(z["header"])))
+        return cls(**kw)
+
+    def in_house(self):
+        """(SphereSet, SphereSimulation) of the in-house engine for this run (dda.spheres)."""
+        from dda.simulation import ContactLaw
+        from dda.spheres import SphereSet, SphereSimulation
+
+        ss = _sphere_set(self)
+        law = ContactLaw(kn=self.kn, ks=self.ks, friction_deg=self.friction_deg, damping=self.damping)
+        sim = SphereSimulation(ss, law, gravity=self.gravity, dt=self.dt, local_damping=self.local_damping)
+        return ss, sim
+
+
+def _sphere_set(run: SphereRun):
+    from dda.spheres import SphereSet
+
+    ss = SphereSet(run.centers, run.radii, run.density)
+    ss.fixed[:] = run.fixed
+    ss.bond_i, ss.bond_j = run.bond_i.astype(np.int64), run.bond_j.astype(np.int64)
+    ss.bond_len0 = run.bond_len0.astype(float)
+    ss.bond_kn, ss.bond_ks = run.bond_kn.astype(float), run.bond_ks.astype(float)
+    ss.bond_ft, ss.bond_fs = run.bond_ft.astype(float), run.bond_fs.astype(float)
+    ss.bond_zeta = np.zeros(run.n_bonds)
+    if run.smooth_joints and len(run.joint_i) and hasattr(ss, "add_joints"):
+        ss.add_joints(np.c_[run.joint_i, run.joint_j], run.joint_normal, run.joint_friction_deg)
+    return ss
+
+
+# -- construction ---------------------------------------------------------------
+def joint_pairs(model):
+    """(pair index into model.bonds, discontinuity index, unit normal i -> j) of every touching pair that the
+    model marks cut by a zero-thickness discontinuity (a joint disc or a triangulated joint surface)."""
+    bonds = np.asarray(model.bonds, np.int64).reshape(-1, 2)
+    cut_by = np.asarray(model.cut_by)
+    nd = len(model.disc_radius)
+    surf = model.surfaces or {}
+    s_index = np.asarray(surf.get("surf_index", np.zeros(0, int)))
+    s_thick = np.asarray(surf.get("surf_thickness", np.zeros(0)))
+    thickness = np.full(nd + len(s_index), np.inf)
+    thickness[:nd] = model.disc_thickness
+    for k, d in enumerate(s_index):
+        thickness[int(d)] = s_thick[k]
+    cut = np.flatnonzero(~np.asarray(model.bonded, bool) & (cut_by >= 0))
+    d = cut_by[cut]
+    keep = thickness[d] == 0.0
+    cut, d = cut[keep], d[keep]
+    normal = np.zeros((len(cut), 3))
+    on_disc = d < nd
+    normal[on_disc] = np.asarray(model.disc_normal)[d[on_disc]]
+    if np.any(~on_disc):
+        from sgim.meshquery import TriMesh
+
+        c = np.asarray(model.centers)
+        vs, fs = surf["surf_vertex_start"], surf["surf_face_start"]
+        for k, dk in enumerate(s_index):
+            sel = np.flatnonzero(d == dk)
+            if not len(sel):
+                continue
+            V = surf["surf_vertices"][vs[k]:vs[k + 1]]
+            F = surf["surf_faces"][fs[k]:fs[k + 1]] - vs[k]
+            mesh = TriMesh(V, F)
+            mid = 0.5 * (c[bonds[cut[sel], 0]] + c[bonds[cut[sel], 1]])
+            face = mesh.closest(mid)[2]
+            t = mesh.vertices[mesh.faces[face]]
+            nrm = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+            normal[sel] = nrm / np.linalg.norm(nrm, axis=1)[:, None]
+    c = np.asarray(model.centers)
+    dx = c[bonds[cut, 1]] - c[bonds[cut, 0]]
+    normal *= np.where(np.einsum("ij,ij->i", normal, dx) < 0, -1.0, 1.0)[:, None]
+    return cut, d, normal
+
+
+def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None, friction_deg=30.0,
+               damping=0.0, joint_friction_deg=None, smooth_joints=True, gravity=(0.0, 0.0, -9.81), dt=None,
+               safety=0.5, duration=0.01, record_every=None, local_damping=0.0, name=None, source=""):
+    """SphereRun of an sgim model (SphereModel or model.npz path). `bonds`: a dda.spheres.BondLaw (default
+    BondLaw()); `fixed`: (n,) bool or None; dt None: `safety` times the in-house critical step."""
+    from dda.spheres import BondLaw, SphereSet, SphereSimulation
+    from dda.simulation import ContactLaw
+
+    if not hasattr(model, "centers"):
+        from sgim.model import SphereModel
+
+        model = SphereModel.load(model)
+    n = len(model.radii)
+    if n == 0:
+        raise SpecError(f"{source or 'model'}: the model has no spheres")
+    law = bonds or BondLaw()
+    ss = SphereSet(model.centers, model.radii, density)
+    pairs = np.asarray(model.bonds, np.int64).reshape(-1, 2)
+    ss.add_bonds(pairs[np.asarray(model.bonded, bool)], law)
+    if fixed is not None:
+        ss.fixed[:] = np.asarray(fixed, bool)
+    ks = kn / 2 if ks is None else ks
+    cut, disc, normal = joint_pairs(model)
+    cut_all = pairs[~np.asarray(model.bonded, bool)]
+    run = SphereRun(
+        name=name or str(model.meta.get("scene", "model")), centers=np.asarray(model.centers, float),
+        radii=np.asarray(model.radii, float), colour=np.asarray(model.colour, np.int8), fixed=ss.fixed.copy(),
+        density=float(density), bond_i=ss.bond_i, bond_j=ss.bond_j, bond_len0=ss.bond_len0, bond_kn=ss.bond_kn,
+        bond_ks=ss.bond_ks, bond_ft=ss.bond_ft, bond_fs=ss.bond_fs, joint_i=pairs[cut, 0], joint_j=pairs[cut, 1],
+        joint_disc=disc.astype(np.int32), joint_normal=normal, cut_i=cut_all[:, 0], cut_j=cut_all[:, 1],
+        kn=float(kn), ks=float(ks), friction_deg=float(friction_deg), damping=float(damping),
+        joint_friction_deg=float(friction_deg if joint_friction_deg is None else joint_friction_deg),
+        smooth_joints=bool(smooth_joints), gravity=np.asarray(gravity, float).reshape(3), dt=0.0,
+        duration=float(duration), record_every=float(record_every or duration / 100),
+        local_damping=float(local_damping), source=str(source))
+    if dt is None:
+        sim = SphereSimulation(_sphere_set(run), ContactLaw(kn=run.kn, ks=run.ks, friction_deg=run.friction_deg,
+                                                              damping=run.damping), safety=safety)
+        dt = safety * sim.dt_crit
+    run.dt = float(dt)
+    if not (run.dt > 0 and math.isfinite(run.dt)):
+        raise SpecError(f"{source or 'model'}: time step must be > 0 (got {dt!r})")
+    return run
+
+
+def from_scene(path):
+    """SphereRun of a DDA scene file with [spheres] (its [simulation], [contact] and [spheres] keys; a scene
+    with blocks is refused: decks carry spheres only, fixed regions stand in for walls)."""
+    from dda.scene import load_scene
+    from sgim.scene import SceneError
+
+    scene = load_scene(path)
+    if not scene.spheres:
+        raise SceneError(Path(path), "spheres", None, "a sphere deck needs a scene with [spheres] (a model)")
+    if scene.blocks:
+        raise SceneError(Path(path), "block", len(scene.blocks),
+                         "sphere decks carry spheres only: use [spheres] fixed regions instead of blocks")
+    sp = scene.spheres
+    model = sp["model"]
+    fixed = scene.fixed_spheres(model.centers)
+    law = scene.law
+    try:
+        return from_model(model, density=sp["density"], fixed=fixed, bonds=sp["bonds"], kn=law.kn, ks=law.ks,
+                          friction_deg=law.friction_deg, damping=law.damping,
+                          joint_friction_deg=sp.get("joint_friction"), smooth_joints=sp.get("smooth_joints", True),
+                          gravity=scene.gravity, dt=scene.dt, safety=scene.safety, duration=scene.duration,
+                          record_every=scene.record_every, local_damping=scene.local_damping, name=scene.name,
+                          source=str(path))
+    except SpecError as exc:
+        raise SceneError(Path(path), "spheres.model", sp.get("path"), str(exc).split(": ", 1)[-1]) from None
+
+
+__all__ = ["SphereRun", "SpecError", "from_model", "from_scene", "joint_pairs"]

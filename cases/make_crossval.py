@@ -1,0 +1,130 @@
+"""Author the cross-validation scenes in cases/crossval/ (sgim models and the DDA scenes that run them).
+
+    python -m cases.make_crossval        # rewrites cases/crossval/*.toml
+
+- hang_{intact,fault,joint,small_joint}: a 1.0 x 0.6 x 1.2 m block of bonded FCC spheres (r = 0.05) hanging
+  from its fixed top layer under gravity; a 0.12 m fault layer, a through-going joint, or a small interior joint.
+- column: a 0.3 x 0.3 x 1.5 m FCC column (r = 0.05) hanging from its top, bonds as central springs (shear ratio
+  1e-6), heavily damped: the static elongation against the exact solution of the spring network.
+- wedge: the paper's wedge (joints 45/005 and 55/135, face 65/065, height 10 m) as FCC spheres (r = 0.5): the
+  wedge's spheres bonded, the rock behind the joints fixed, the joints smooth: the friction at which it starts to
+  slide against Hoek & Bray and the DDA block wedge.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent / "crossval"
+
+HANG_VARIANTS = {
+    "intact": [],
+    "fault": [dict(name="fault", centre=[0.5, 0.3, 0.5], dip=10.0, dip_direction=90.0, radius=2.0,
+                   thickness=0.12)],
+    "joint": [dict(name="joint", centre=[0.5, 0.3, 0.6], dip=30.0, dip_direction=90.0, radius=2.0,
+                   thickness=0.0)],
+    "small_joint": [dict(name="small joint", centre=[0.5, 0.3, 0.6], dip=30.0, dip_direction=90.0,
+                         radius=0.15, thickness=0.0)],
+}
+WEDGE = dict(joint_a=(45.0, 5.0), joint_b=(55.0, 135.0), face=(65.0, 65.0), height=10.0, radius=0.5, margin=1.6,
+             rock=1.5)
+
+
+def _fmt(v):
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    return repr(float(v)) if isinstance(v, (float, np.floating)) else str(v)
+
+
+def _table(name, d, array=False):
+    head = f"[[{name}]]" if array else f"[{name}]"
+    return "\n".join([head] + [f"{k} = {_fmt(v)}" for k, v in d.items()]) + "\n"
+
+
+def sgim_scene(name, comment, lo, hi, radius, discs=(), cavities=()):
+    parts = [f"# {comment}\n# Written by cases/make_crossval.py.\n", f'name = "{name}"\n',
+             _table("domain", {"min": list(lo), "max": list(hi)}),
+             _table("packing", {"kind": "fcc", "radius": radius}), _table("bonds", {"rule": "colour"})]
+    parts += [_table("discontinuity", d, True) for d in discs]
+    parts += [_table("cavity", c, True) for c in cavities]
+    return "\n".join(parts)
+
+
+def dda_scene(name, comment, model, simulation, contact, spheres):
+    return "\n".join([f"# {comment}\n# Written by cases/make_crossval.py.\n", f'name = "{name}"\n',
+                      _table("simulation", simulation), _table("contact", contact),
+                      _table("spheres", {"model": model, **spheres})])
+
+
+def wedge_cavities():
+    """Closed surfaces of what the wedge model leaves out: the air in front of the slope face, and the rock
+    deeper than ``rock`` below either joint (the fixed rock is a layer under the joints)."""
+    from dda import hoekbray
+    from dda.cut import clip
+    from dda.shapes import box
+
+    w = WEDGE
+    a, b, f, t, dt, verts = hoekbray.wedge_geometry(w["joint_a"], w["joint_b"], w["face"], None, w["height"])
+    lo = verts.min(0) - w["margin"]
+    hi = verts.max(0) + w["margin"]
+    hi[2] = verts[:, 2].max()
+    big = box(lo - 5.0, hi + 5.0)
+    out = []
+    for name, plane in (("air", (-f, 0.0)), ("deep rock A", (a, -w["rock"])), ("deep rock B", (b, -w["rock"]))):
+        piece = clip(big, plane)
+        tri = [[p[0], p[k], p[k + 1]] for p in piece.faces for k in range(1, len(p) - 1)]
+        out.append(dict(name=name, vertices=np.round(piece.vertices, 9).tolist(), faces=tri))
+    return lo, hi, out
+
+
+def write_all(folder=HERE):
+    folder.mkdir(exist_ok=True)
+    files = {}
+    sim = {"duration": 0.15, "record_every": 0.005, "local_damping": 0.2, "frames": 1}
+    for var, discs in HANG_VARIANTS.items():
+        files[f"hang_{var}_model.toml"] = sgim_scene(
+            f"hang_{var}_model", f"Hanging block ({var.replace('_', ' ')}): bonded FCC spheres, r = 0.05.",
+            (0.0, 0.0, 0.0), (1.0, 0.6, 1.2), 0.05, discs)
+        files[f"hang_{var}.toml"] = dda_scene(
+            f"hang_{var}", "The block hangs from its fixed top layer (z > 1.1) under gravity for 0.15 s: the "
+            "spheres that no bond path ties to the top fall (0.11 m), the rest hold.",
+            f"hang_{var}_model.toml", sim, {"kn": 1e7, "ks": 5e6, "friction": 30.0},
+            {"density": 2600.0, "fixed": ["z>1.1"], "bond_young": 1e8})
+    files["column_model.toml"] = sgim_scene("column_model", "A 0.3 x 0.3 x 1.5 m column of bonded FCC spheres.",
+                                            (0.0, 0.0, 0.0), (0.3, 0.3, 1.5), 0.05)
+    files["column.toml"] = dda_scene(
+        "column", "The column hangs from its fixed top (z > 1.45); bonds are central springs (shear ratio "
+        "1e-6); local damping 0.7 brings it to rest: its static elongation against the spring network's exact "
+        "solution.", "column_model.toml", {"duration": 0.3, "record_every": 0.01, "local_damping": 0.7,
+                                            "frames": 1},
+        {"kn": 1e7, "ks": 5e6, "friction": 30.0},
+        {"density": 2600.0, "fixed": ["z>1.45"], "bond_young": 1e8, "bond_shear_ratio": 1e-6})
+    lo, hi, cavities = wedge_cavities()
+    w = WEDGE
+    discs = [dict(name=f"joint {n}", centre=[0.0, 0.0, 0.0], dip=d[0], dip_direction=d[1], radius=60.0,
+                  thickness=0.0) for n, d in (("A", w["joint_a"]), ("B", w["joint_b"]))]
+    files["wedge_model.toml"] = sgim_scene(
+        "wedge_model", "The paper's wedge (joints A 45/005, B 55/135, face 65/065, height 10 m) in FCC spheres, "
+        "r = 0.5; the air in front of the face and the rock deeper than 1.5 m below the joints are cavities.", np.round(lo, 6).tolist(), np.round(hi, 6).tolist(),
+        w["radius"], discs, cavities)
+    files["wedge.toml"] = dda_scene(
+        "wedge", "The wedge's spheres are bonded; the rock below either joint is fixed; the joints are smooth. "
+        "At joint friction 18 deg (below the critical 19.7 deg) it slides; `cases crossval` finds the onset.",
+        "wedge_model.toml", {"duration": 1.2, "record_every": 0.02, "local_damping": 0.1, "frames": 1},
+        {"kn": 1e9, "ks": 5e8, "friction": 30.0},
+        {"density": 2600.0, "bond_young": 1e9, "fixed_below": [[*w["joint_a"], 0.0, 0.0, 0.0],
+                                                               [*w["joint_b"], 0.0, 0.0, 0.0]],
+         "smooth_joints": True, "joint_friction": 18.0})
+    for name, text in files.items():
+        (folder / name).write_text(text)
+    return sorted(files)
+
+
+if __name__ == "__main__":
+    for name in write_all():
+        print(HERE / name)
