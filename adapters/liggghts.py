@@ -1,0 +1,533 @@
+"""LIGGGHTS-PUBLIC decks and runner for bonded-sphere runs (adapters.spec.SphereRun).
+
+``write_deck(run, folder, variant="bonds")`` writes ``data`` + ``in`` into `folder` (the caller saves
+``run.npz`` beside them) and returns the extra deck.json keys; ``run_deck(folder, out, np=1, timeout=None,
+progress=None)`` runs the deck and returns the RunResult it saved into `out`.
+
+Common to every variant: ``units si``, ``atom_style hybrid granular molecular``, ``newton off``,
+``communicate single vel yes``, fixed boundaries around the model (``deck_box``: four radii, plus the
+free-fall distance over the run along gravity; ``liggghts_box_margin`` in run.extra for one margin on every
+side), one time step run.dt, gravity by ``fix gravity``. Atom type = colour + 1 (1 intact, 2 red, 3 green,
+4 blue), + 4 for fixed spheres (group ``fixed``: never integrated, zero velocity). Contacts:
+``pair_style gran model hooke/stiffness tangential history`` with absolute (constant) stiffness kn = run.kn
+and kt = run.ks [N/m] (``fix property/global kn / kt peratomtypepair``), Coulomb friction tan(run.friction_deg)
+(green-blue pairs: tan(run.joint_friction_deg)), normal viscous damping gamman_abs = 2 run.damping
+sqrt(kn m_eff) (m_eff of the mean sphere: m/2 free-free, m
+free-fixed) and ``limitForce on``; no tangential damping (as the in-house contact law).
+
+Variants:
+
+- ``bonds`` (primary): ``bond_style harmonic`` and a ``Bonds`` section with exactly the run's bonds
+  (run.bond_i/j), bond k of type k + 1 with r0 = bond_len0 and K = bond_kn / 2 (LIGGGHTS' harmonic force is
+  2 K (r - r0)). LIGGGHTS-PUBLIC cannot break bonds: the runner (``run_deck``) runs the deck in chunks through
+  the engine's input, reads a full-precision dump after each chunk, finds the bonds whose tension
+  kn (r - r0) exceeds bond_ft and removes exactly those with ``delete_bonds all bond T remove``.
+- ``sjkr``: type-pair adhesion instead of bonds, ``pair_style gran model hertz tangential history cohesion
+  sjkr`` with ``cohesionEnergyDensity peratomtypepair`` encoding the colour rule: every type pair is cohesive
+  except red with anything and green with blue. What it can represent: which colour pairs stick. What it cannot:
+  bonds. SJKR is an adhesion proportional to the overlap area of two spheres: it acts only while they overlap,
+  holds nothing in tension once they separate, re-forms on every new contact (a fallen piece sticks where it
+  lands) and has no breakage state; it does not know which joint cut a pair (a green sphere of one joint and a
+  blue sphere of another are not cohesive either); contacts are Hertzian (a youngsModulus giving the Hertz
+  tangent stiffness run.kn at the overlap d*, ``hard_particles yes``), not linear. Since adhesion needs an
+  overlap, radii are changed by a fraction of d* per colour (``SJKR_GROW``; d* = run.extra
+  ``liggghts_sjkr_overlap`` x mean radius, default 2e-3; densities scaled to keep the masses): touching
+  intact pairs start at their adhesive equilibrium overlap d*, intact-green/blue pairs at d*/2, green-blue
+  and red-intact pairs just touching (no push between non-cohesive pairs); green-green and blue-blue pairs start
+  touching, so they only stick once pressed together, and red spheres start d*/2 off green/blue ones. The
+  cohesion energy density makes d* the equilibrium (``sjkr_parameters``): pull-off force 8/81 kn d* per pair,
+  not bond_ft.
+- ``clumps``: rigid bodies, ``fix rigid molecule`` with molecule id = connected component of the run's bond
+  graph; spheres without bonds stay free granular atoms (one-atom rigid bodies are an error); a component with a
+  fixed sphere is fixed as a whole; contacts inside a body are excluded (``neigh_modify exclude molecule``).
+  Bodies never break and never deform.
+
+What LIGGGHTS-PUBLIC cannot do exactly (listed per run in RunResult.extra["approximations"]):
+
+- harmonic bonds are central springs: no shear spring and no bending, so shear breakage (bond_fs) is not
+  applied (a simple-cubic lattice is a mechanism: use FCC/HCP or random packings); bonds have no damping;
+- bonded pairs also get the granular contact when they overlap (compression stiffness kn_bond + kn);
+- bond breakage is checked by the runner between chunks of run.record_steps steps (run.extra
+  ``liggghts_check_steps`` for a shorter check), not every step;
+- no smooth joint: joint pairs are plain contacts along the centre line (with the joint friction);
+- Cundall's local damping does not exist in LIGGGHTS-PUBLIC: runs are undamped unless run.extra
+  ``liggghts_viscous`` = gamma [kg/s] adds ``fix viscous`` (force -gamma v on absolute velocities, so it also
+  slows free flight; deck.json ``viscous_gamma_equivalent`` gives the gamma with the same loss per cycle at the
+  mean sphere's frequency);
+- the Coulomb limit uses the damped normal force (in-house: the elastic one).
+
+Results (RunResult, engine "liggghts"): records every run.record_steps steps from t = 0 (series "kinetic":
+translational + rotational energy of the free spheres, "bonds_intact", "atoms"), positions at the records
+when n x records <= 5e6, final positions and velocities at full precision (%.17g dumps). ``bond_intact``:
+bonds variant: not deleted by the runner; sjkr: the pair is in (adhesive) contact; clumps: always intact.
+After every chunk the runner compares the atom count with the run's and stops with EngineError (result
+incomplete, saved) when LIGGGHTS lost particles (they left the fixed box); a LIGGGHTS "ERROR: ..." line
+becomes the EngineError message; ``timeout`` covers the whole run.
+
+Run by hand (no bond breakage, dumps every record): ``cd DECK && liggghts -in in``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ._liggghts_io import DUMP_COLUMNS, DUMP_FORMAT, MARK, Driver, DriverError, read_dump, write_data
+from .process import EngineError, describe_failure, find_engine, unbuffered
+from .result import COMPLETE, INCOMPLETE, RunResult
+from .spec import SphereRun
+
+VARIANTS = ("bonds", "sjkr", "clumps")
+N_TYPES = 8  # colour (4) x fixed (2)
+POS_LIMIT = 5_000_000
+
+
+# -- deck ------------------------------------------------------------------------------------------------
+def atom_types(run: SphereRun, fixed=None):
+    """LIGGGHTS atom type of each sphere: colour + 1, + 4 when fixed."""
+    fixed = run.fixed if fixed is None else fixed
+    return np.asarray(run.colour, np.int64) + 1 + 4 * np.asarray(fixed, bool)
+
+
+def components(run: SphereRun):
+    """Connected components of the bond graph: (labels (n,), size of each sphere's component)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = run.n
+    g = coo_matrix((np.ones(run.n_bonds), (run.bond_i, run.bond_j)), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    size = np.bincount(lab)[lab]
+    return lab, size
+
+
+def clump_molecules(run: SphereRun):
+    """(molecule id (n,), fixed (n,), number of rigid bodies K) for the clumps variant: ids 1..K are the free
+    multi-sphere components (the rigid bodies), then the rest (single spheres, fixed components)."""
+    lab, size = components(run)
+    fixed_comp = np.zeros(lab.max() + 1, bool)
+    fixed_comp[lab[np.asarray(run.fixed, bool)]] = True
+    fixed = fixed_comp[lab]
+    body = (size > 1) & ~fixed
+    order = np.r_[np.unique(lab[body]), np.setdiff1d(np.unique(lab), np.unique(lab[body]))]
+    new_id = np.empty(lab.max() + 1, np.int64)
+    new_id[order] = np.arange(1, len(order) + 1)
+    return new_id[lab], fixed, int(len(np.unique(lab[body])))
+
+
+def _mean_mass(run):
+    r = float(np.mean(run.radii))
+    return run.density * 4.0 / 3.0 * math.pi * r ** 3, r
+
+
+def _matrix(values):
+    return " ".join(f"{v:.17g}" for v in np.asarray(values, float).ravel())
+
+
+def _type_pairs():
+    """(colour_a, colour_b, fixed_a, fixed_b) of the N_TYPES x N_TYPES matrix, row-major."""
+    t = np.arange(N_TYPES)
+    a, b = np.meshgrid(t, t, indexing="ij")
+    return a % 4, b % 4, a >= 4, b >= 4
+
+
+def cohesion_matrix():
+    """Colour rule as a type-pair mask: True where the pair is cohesive (intact/green/blue with each other,
+    except green-blue; red with nothing)."""
+    ca, cb, _, _ = _type_pairs()
+    red = (ca == 1) | (cb == 1)
+    across = ((ca == 2) & (cb == 3)) | ((ca == 3) & (cb == 2))
+    return ~(red | across)
+
+
+MAX_BINS = 10_000_000
+
+
+def deck_box(run: SphereRun):
+    """(lo, hi) of the fixed-boundary box: the model's bounding box plus four radii, extended along gravity by
+    1.1 times the free-fall distance over the run (capped so that the neighbour bins of the box stay below
+    MAX_BINS: LIGGGHTS bins the whole box). run.extra ``liggghts_box_margin`` [m] sets one margin for every
+    side instead. Particles leaving the box are lost (the runner stops with an error)."""
+    rmax = float(np.max(run.radii))
+    lo = run.centers.min(0) - rmax
+    hi = run.centers.max(0) + rmax
+    if "liggghts_box_margin" in run.extra:
+        m = float(run.extra["liggghts_box_margin"])
+        return lo - m, hi + m
+    lo, hi = lo - 4.0 * rmax, hi + 4.0 * rmax
+    fall = 0.55 * np.abs(np.asarray(run.gravity, float)) * run.duration ** 2
+    b = max(rmax, 0.5 * (2.0 * rmax + 0.3 * float(np.min(run.radii))))  # about LIGGGHTS' bin size
+    for a in range(3):
+        if fall[a] <= 0:
+            continue
+        others = [k for k in range(3) if k != a]
+        lateral = float(np.prod([(hi[k] - lo[k]) / b for k in others]))
+        cap = MAX_BINS / lateral * b - (hi[a] - lo[a])
+        ext = min(fall[a], max(cap, 0.0))
+        if run.gravity[a] < 0:
+            lo[a] -= ext
+        else:
+            hi[a] += ext
+    return lo, hi
+
+
+def check_steps(run: SphereRun):
+    c = int(run.extra.get("liggghts_check_steps", run.record_steps))
+    return max(1, min(c, run.record_steps))
+
+
+def approximations(run: SphereRun, variant):
+    """What this deck cannot represent exactly (strings for RunResult.extra["approximations"])."""
+    out = []
+    if variant == "bonds" and run.n_bonds:
+        out.append("bonds are central springs (bond_style harmonic): no shear spring, no bending, no bond damping")
+        if np.any(np.isfinite(run.bond_fs)):
+            out.append("bond shear strength (bond_fs) not applied: harmonic bonds carry no shear force")
+        if np.any(np.isfinite(run.bond_ft)):
+            out.append(f"bond tension breakage checked by the runner every {check_steps(run)} steps "
+                       "(delete_bonds between chunks), not every step")
+        out.append("bonded pairs also get the granular contact when they overlap (compression: kn_bond + kn)")
+    if variant == "sjkr":
+        out.append("no bonds: SJKR adhesion per colour type pair (acts only while spheres overlap, re-forms on "
+                   "new contacts, never breaks); Hertzian contacts instead of linear springs")
+        out.append("green-blue pairs are non-cohesive whichever joint they belong to")
+    if variant == "clumps":
+        out.append("bonded components are rigid bodies (fix rigid molecule): no bond deformation or breakage")
+        out.append("components with a fixed sphere are fixed as a whole")
+    if len(run.joint_i) and run.smooth_joints:
+        out.append("no smooth joint: joint pairs are plain contacts along the centre line (joint friction on "
+                   "green-blue type pairs)")
+    if run.damping > 0:
+        out.append("contact damping with the effective mass of the mean sphere; Coulomb limit on the damped "
+                   "normal force")
+    if run.local_damping > 0 and "liggghts_viscous" not in run.extra:
+        out.append(f"Cundall local damping {run.local_damping:g} not represented (LIGGGHTS-PUBLIC has none): "
+                   "run undamped (run.extra liggghts_viscous = gamma [kg/s] adds fix viscous)")
+    if "liggghts_viscous" in run.extra:
+        out.append(f"viscous damping fix viscous {float(run.extra['liggghts_viscous']):g} kg/s on absolute "
+                   "velocities (also slows free fall: terminal velocity m g / gamma)"
+                   + (f" instead of Cundall local damping {run.local_damping:g}" if run.local_damping > 0 else ""))
+    return out
+
+
+def viscous_gamma(run):
+    """A fix viscous gamma [kg/s] with the energy loss per cycle of Cundall local damping alpha (4 alpha =
+    4 pi zeta, so zeta = alpha / pi) at the frequency of a mean sphere on its springs (reported in deck.json as
+    a suggestion for run.extra ``liggghts_viscous``; lower modes and free flight are damped far more)."""
+    m, _ = _mean_mass(run)
+    k_sphere = 2.0 * float(np.sum(run.bond_kn)) / run.n if run.n_bonds else 0.0
+    k_sphere = max(k_sphere, 4.0 * run.kn)
+    omega = math.sqrt(k_sphere / m)
+    return 2.0 * (run.local_damping / math.pi) * m * omega
+
+
+SJKR_NU = 0.25
+# radius change of the sjkr variant per colour (intact, red, green, blue), in units of the overlap d*: touching
+# intact pairs start at d* (their adhesive equilibrium), intact-green/blue at d*/2 (inside the adhesive range),
+# green-blue and red-intact just touching (no push between non-cohesive pairs), red-green/blue and red-red
+# with a gap of d*/2 and d*
+SJKR_GROW = np.array([0.5, -0.5, 0.0, 0.0])
+
+
+def sjkr_overlap(run: SphereRun):
+    """Equilibrium overlap d* of the sjkr variant [m] (run.extra ``liggghts_sjkr_overlap``, a fraction of the
+    mean radius, default 2e-3)."""
+    return float(run.extra.get("liggghts_sjkr_overlap", 2e-3)) * float(np.mean(run.radii))
+
+
+def sjkr_parameters(run: SphereRun):
+    """(youngsModulus, cohesionEnergyDensity, coefficientRestitution) of the sjkr variant.
+
+    Two mean spheres (radius r, R* = r / 2) overlapping by d feel the Hertz repulsion c d^1.5 (c = 4/3 E*
+    sqrt(R*), E* = E / (2 (1 - nu^2))) and the SJKR attraction k_c pi a^2 ~ k_c pi r d. E* is chosen so that
+    the Hertz tangent stiffness 1.5 c sqrt(d*) equals run.kn at the overlap d* (sjkr_overlap), and k_c so that
+    d* is the equilibrium (k_c pi r = c sqrt(d*) = 2 kn / 3): the pair then has the stiffness kn / 3 and a
+    pull-off force 8 / 81 kn d*. run.extra ``liggghts_cohesion`` overrides k_c."""
+    r = float(np.mean(run.radii))
+    d = sjkr_overlap(run)
+    e_star = run.kn / (2.0 * math.sqrt(0.5 * r * d))
+    young = e_star * 2.0 * (1.0 - SJKR_NU ** 2)
+    coh = float(run.extra.get("liggghts_cohesion", (2.0 / 3.0) * run.kn / (math.pi * r)))
+    z = min(run.damping, 0.99)
+    e_rest = float(run.extra.get("liggghts_restitution", math.exp(-math.pi * z / math.sqrt(1.0 - z * z))))
+    return young, coh, e_rest
+
+
+def write_deck(run: SphereRun, folder, variant="bonds"):
+    """Write ``data`` and ``in`` for `run` into `folder`; returns the extra deck.json keys."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown LIGGGHTS variant {variant!r} (choose from {', '.join(VARIANTS)})")
+    folder = Path(folder)
+    n = run.n
+    m_mean, r_mean = _mean_mass(run)
+    fixed = np.asarray(run.fixed, bool)
+    mol = np.ones(n, np.int64)
+    n_bodies = 0
+    if variant == "clumps":
+        mol, fixed, n_bodies = clump_molecules(run)
+    types = atom_types(run, fixed)
+    box = deck_box(run)
+    bonds = None
+    if variant == "bonds":
+        bonds = (run.bond_i, run.bond_j, 0.5 * np.asarray(run.bond_kn, float), run.bond_len0)
+    radii, density = run.radii, np.full(n, float(run.density))
+    if variant == "sjkr":  # adhesion needs overlap: radii changed by SJKR_GROW[colour] d* (masses kept)
+        radii = run.radii + SJKR_GROW[np.asarray(run.colour, np.int64)] * sjkr_overlap(run)
+        density = run.density * (run.radii / radii) ** 3
+    write_data(folder / "data", run.centers, radii, density, types, mol, N_TYPES, box, bonds=bonds,
+               title=f"{run.name} ({variant})")
+
+    ca, cb, fa, fb = _type_pairs()
+    joint = ((ca == 2) & (cb == 3)) | ((ca == 3) & (cb == 2))
+    mu = np.where(joint & run.smooth_joints, math.tan(math.radians(run.joint_friction_deg)),
+                  math.tan(math.radians(run.friction_deg)))
+    meff = np.where(fa | fb, m_mean, 0.5 * m_mean)
+    gamma_n = 2.0 * run.damping * np.sqrt(run.kn * meff)
+    skin = 0.3 * float(np.min(run.radii))
+    g = np.asarray(run.gravity, float)
+    gnorm = float(np.linalg.norm(g))
+    L = [f"# rockdem LIGGGHTS deck '{run.name}', variant {variant}: {n} spheres, "
+         f"{run.n_bonds if variant == 'bonds' else 0} bonds, {run.steps} steps of {run.dt:.6g} s",
+         "# run with `adapters run DECK` (bond breakage between chunks) or by hand: liggghts -in in",
+         "variable driven index 0",
+         "atom_style hybrid granular molecular", "atom_modify map array sort 0 0.0", "units si", "boundary f f f",
+         "newton off", "communicate single vel yes"]
+    if variant == "sjkr":
+        L.append("hard_particles yes")
+    if variant == "bonds":
+        L.append("bond_style harmonic")
+    L += ["read_data data", f"neighbor {skin:.17g} bin", "neigh_modify delay 0"]
+    if variant == "clumps" and n_bodies:
+        L.append(f"group clump molecule 1:{n_bodies}")
+        L.append("neigh_modify exclude molecule clump")
+    fx = "fix"
+    if variant == "sjkr":
+        young, coh, e_rest = sjkr_parameters(run)
+        L += [f"{fx} m1 all property/global youngsModulus peratomtype {_matrix(np.full(N_TYPES, young))}",
+              f"{fx} m2 all property/global poissonsRatio peratomtype {_matrix(np.full(N_TYPES, SJKR_NU))}",
+              f"{fx} m3 all property/global coefficientRestitution peratomtypepair {N_TYPES} "
+              f"{_matrix(np.full((N_TYPES, N_TYPES), e_rest))}",
+              f"{fx} m4 all property/global coefficientFriction peratomtypepair {N_TYPES} {_matrix(mu)}",
+              f"{fx} m5 all property/global cohesionEnergyDensity peratomtypepair {N_TYPES} "
+              f"{_matrix(np.where(cohesion_matrix(), coh, 0.0))}",
+              "pair_style gran model hertz tangential history cohesion sjkr"]
+    else:
+        L += [f"{fx} m1 all property/global kn peratomtypepair {N_TYPES} "
+              f"{_matrix(np.full((N_TYPES, N_TYPES), run.kn))}",
+              f"{fx} m2 all property/global kt peratomtypepair {N_TYPES} "
+              f"{_matrix(np.full((N_TYPES, N_TYPES), run.ks))}",
+              f"{fx} m3 all property/global gamman_abs peratomtypepair {N_TYPES} {_matrix(gamma_n)}",
+              f"{fx} m4 all property/global gammat_abs peratomtypepair {N_TYPES} "
+              f"{_matrix(np.zeros((N_TYPES, N_TYPES)))}",
+              f"{fx} m5 all property/global coefficientFriction peratomtypepair {N_TYPES} {_matrix(mu)}",
+              "pair_style gran model hooke/stiffness tangential history absolute_damping on "
+              "tangential_damping off limitForce on"]
+    L += ["pair_coeff * *", "group fixed type 5 6 7 8", "velocity fixed set 0 0 0"]
+    if variant == "clumps" and n_bodies:
+        L += ["group movable subtract all fixed", "group single subtract movable clump"]
+    else:
+        L += ["group single subtract all fixed"]
+    if gnorm > 0:
+        L.append(f"fix grav all gravity {gnorm:.17g} vector {g[0] / gnorm:.17g} {g[1] / gnorm:.17g} "
+                 f"{g[2] / gnorm:.17g}")
+    L.append("fix integrate single nve/sphere")
+    if variant == "clumps" and n_bodies:
+        L.append("fix bodies clump rigid molecule")
+    if "liggghts_viscous" in run.extra:
+        L.append(f"fix viscous all viscous {float(run.extra['liggghts_viscous']):.17g}")
+    L += [f"timestep {run.dt:.17g}", "variable natoms equal atoms",
+          "thermo_style custom step atoms ke", f"thermo {max(run.record_steps, 1)}",
+          "thermo_modify lost ignore norm no",
+          'if "${driven} == 0" then &',
+          f'  "dump rec all custom {run.record_steps} dump.*.txt {" ".join(DUMP_COLUMNS)}" &',
+          '  "dump_modify rec sort id" &',
+          f'  "run {run.steps}"']
+    (folder / "in").write_text("\n".join(L) + "\n")
+    return {"variant": variant, "atom_types": N_TYPES, "bond_types": int(run.n_bonds) if variant == "bonds" else 0,
+            "rigid_bodies": int(n_bodies), "box": [list(map(float, box[0])), list(map(float, box[1]))],
+            "check_steps": check_steps(run), "approximations": approximations(run, variant),
+            "viscous_gamma_equivalent": viscous_gamma(run) if run.local_damping > 0 else 0.0}
+
+
+# -- runner ----------------------------------------------------------------------------------------------
+def _command(np_, exe):
+    cmd = [exe, "-log", "none", "-echo", "none", "-var", "driven", "1"]
+    if np_ <= 1:
+        return unbuffered(cmd)
+    mpirun = find_engine("mpirun")
+    pre = [mpirun]
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        pre.append("--allow-run-as-root")
+    pre += ["--oversubscribe", "-n", str(int(np_))]
+    return pre + unbuffered(cmd)
+
+
+def _boundaries(total, record, check):
+    b = set(range(record, total, record)) | set(range(check, total, check)) | {total}
+    return sorted(b)
+
+
+def _delete_commands(types):
+    """delete_bonds commands for the (1-based) bond types (this build takes one type per command)."""
+    return [f"delete_bonds all bond {int(t)} remove" for t in np.sort(np.asarray(types, np.int64))]
+
+
+def deck_variant(folder):
+    """The variant of a deck folder: deck.json's, else the one named in the first line of ``in``."""
+    folder = Path(folder)
+    if (folder / "deck.json").is_file():
+        v = json.loads((folder / "deck.json").read_text()).get("variant")
+        if v:
+            return v
+    head = (folder / "in").read_text().split("\n", 1)[0]
+    for v in VARIANTS:
+        if f"variant {v}:" in head:
+            return v
+    return "bonds"
+
+
+def run_deck(folder, out, np=1, timeout=None, progress=None):
+    """Run the LIGGGHTS deck `folder`; the RunResult (engine "liggghts") is saved into `out` and returned.
+
+    Raises EngineError (with the partial result, marked incomplete and saved) when LIGGGHTS is missing, stops
+    with an error, runs past `timeout` seconds, or loses particles."""
+    return _run_deck(folder, out, int(np), timeout, progress)
+
+
+def _run_deck(folder, out, nprocs, timeout, progress):
+    exe = find_engine("liggghts")
+    if nprocs > 1:
+        find_engine("mpirun")
+    folder, out = Path(folder).resolve(), Path(out).resolve()
+    info = {}
+    if (folder / "deck.json").is_file():
+        info = json.loads((folder / "deck.json").read_text())
+    run = SphereRun.load(folder / "run.npz")
+    variant = deck_variant(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    dump = out / ".liggghts_dump.txt"
+    log = out / "liggghts.log"
+    rel = os.path.relpath(dump, folder)
+    n = run.n
+    mass = run.density * 4.0 / 3.0 * math.pi * run.radii ** 3
+    inertia = 0.4 * mass * run.radii ** 2
+    mobile = ~np.asarray(run.fixed, bool)
+    if variant == "clumps":
+        mobile = ~clump_molecules(run)[1]
+    breakable = np.flatnonzero(np.isfinite(run.bond_ft)) if variant == "bonds" else np.zeros(0, np.int64)
+    contact_reach = None
+    if variant == "sjkr":  # a bond counts as intact while its pair is in (adhesive) contact
+        rd = run.radii + SJKR_GROW[np.asarray(run.colour, np.int64)] * sjkr_overlap(run)
+        contact_reach = (rd[run.bond_i] + rd[run.bond_j]) * (1.0 + 1e-9)
+    intact = np.ones(run.n_bonds, bool)
+    steps, rec, chk = run.steps, run.record_steps, check_steps(run)
+    bounds = _boundaries(steps, rec, chk)
+    n_records = 1 + len([b for b in bounds if b % rec == 0 or b == steps])
+    keep_pos = n * n_records <= POS_LIMIT
+    times, kin, nbond, natoms, poses = [], [], [], [], []
+    state = {"pos": run.centers.copy(), "vel": np.zeros((n, 3)), "step": 0}
+    extra = {"variant": variant, "np": nprocs, "approximations": info.get("approximations")
+             or approximations(run, variant), "bond_check_steps": chk, "broken_by_runner": 0}
+    t0 = time.perf_counter()
+    deadline = None if timeout is None else t0 + float(timeout)
+
+    def result(status=COMPLETE, message=""):
+        res = RunResult(engine="liggghts", x0=run.centers.copy(), final_pos=state["pos"].copy(),
+                        final_vel=state["vel"].copy(), bond_intact=intact.copy(), time=np.asarray(times, float),
+                        pos=np.asarray(poses) if keep_pos and poses else (np.zeros((0, n, 3)) if keep_pos else None),
+                        series={"kinetic": np.asarray(kin, float), "bonds_intact": np.asarray(nbond, np.int64),
+                                "atoms": np.asarray(natoms, np.int64)},
+                        status=status, message=message, steps=int(state["step"]), dt=float(run.dt),
+                        wall_s=time.perf_counter() - t0, extra=extra)
+        res.save(out)
+        return res
+
+    def fail(message):
+        res = result(INCOMPLETE, message)
+        raise EngineError(message, result=res)
+
+    def read_state(k, count):
+        ids, vals = read_dump(dump)
+        if len(ids) != n or count != n:
+            lost = n - min(len(ids), count)
+            step = state["step"]
+            fail(f"liggghts: lost {lost} of {n} particles by step {step} (t = {step * run.dt:.6g} s): they left "
+                 f"the fixed box (deck.json 'box', run.extra 'liggghts_box_margin') (log {log})")
+        if not np.array_equal(ids, np.arange(1, n + 1)):
+            fail(f"liggghts: dump {dump} does not hold atoms 1..{n} in order (log {log})")
+        state["pos"], state["vel"] = vals[:, 0:3].copy(), vals[:, 3:6].copy()
+        return vals[:, 6:9]
+
+    def record(omega):
+        times.append(state["step"] * run.dt)
+        v, w = state["vel"][mobile], omega[mobile]
+        kin.append(float(0.5 * np.sum(mass[mobile] * np.einsum("ij,ij->i", v, v))
+                         + 0.5 * np.sum(inertia[mobile] * np.einsum("ij,ij->i", w, w))))
+        nbond.append(int(intact.sum()))
+        natoms.append(n)
+        if keep_pos:
+            poses.append(state["pos"].copy())
+
+    write = (f'write_dump all custom "{rel}" {" ".join(DUMP_COLUMNS)} modify sort id format "{DUMP_FORMAT}"')
+    if progress:
+        progress(f"liggghts: {n} spheres, {run.n_bonds} bonds, {steps} steps on {nprocs} rank(s) (log {log})")
+    drv = Driver(_command(nprocs, exe), folder, log)
+    try:
+        drv.send(["include in", "run 0 post no", write, f'print "{MARK} 0 ${{natoms}}"'])
+        k = 0
+        count = drv.wait_mark(0, deadline)
+        record(read_state(0, count))
+        last_msg = time.perf_counter()
+        pre = "no"
+        for b in bounds:
+            k += 1
+            drv.send([f"run {b - state['step']} pre {pre} post no", write, f'print "{MARK} {k} ${{natoms}}"'])
+            count = drv.wait_mark(k, deadline)
+            state["step"] = b
+            omega = read_state(k, count)
+            pre = "no"
+            if len(breakable):
+                bi, bj = run.bond_i[breakable], run.bond_j[breakable]
+                dist = np.linalg.norm(state["pos"][bj] - state["pos"][bi], axis=1)
+                tension = run.bond_kn[breakable] * (dist - run.bond_len0[breakable])
+                broke = breakable[intact[breakable] & (tension > run.bond_ft[breakable])]
+                if len(broke):
+                    intact[broke] = False
+                    extra["broken_by_runner"] += int(len(broke))
+                    drv.send(_delete_commands(broke + 1))
+                    pre = "yes"
+            if contact_reach is not None:
+                intact[:] = np.linalg.norm(state["pos"][run.bond_j] - state["pos"][run.bond_i], axis=1) \
+                    <= contact_reach
+            if b % rec == 0 or b == steps:
+                record(omega)
+            now = time.perf_counter()
+            if progress and (now - last_msg >= 1.0 or b == steps):
+                last_msg = now
+                progress(f"liggghts: t = {b * run.dt:.4g} s  step {b}/{steps} ({100.0 * b / steps:5.1f} %)  "
+                         f"bonds {int(intact.sum())}/{run.n_bonds}  atoms {count}")
+        outcome = drv.close(deadline)
+        if not outcome.ok:
+            fail(describe_failure("liggghts", outcome, log))
+    except DriverError as exc:
+        fail(describe_failure("liggghts", exc.outcome, log))
+    except EngineError:
+        if drv.proc.poll() is None:
+            drv.finish(kill=True)
+        raise
+    finally:
+        if drv.proc.poll() is None:
+            drv.finish(kill=True)
+        try:
+            dump.unlink()
+        except OSError:
+            pass
+    return result()
+
+
+__all__ = ["write_deck", "run_deck", "VARIANTS", "atom_types", "components", "clump_molecules",
+           "cohesion_matrix", "approximations"]
