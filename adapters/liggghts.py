@@ -46,7 +46,9 @@ What LIGGGHTS-PUBLIC cannot do exactly (listed per run in RunResult.extra["appro
 
 - harmonic bonds are central springs: no shear spring and no bending, so shear breakage (bond_fs) is not
   applied (a simple-cubic lattice is a mechanism: use FCC/HCP or random packings); bonds have no damping;
-- bonded pairs also get the granular contact when they overlap (compression stiffness kn_bond + kn);
+- bonded pairs also get the granular contact when they overlap (compression stiffness kn_bond + kn): the bonds
+  variant shrinks the contact radii by ``bond_gap`` (1e-3 by default, masses kept), so touching bonded
+  neighbours get it only beyond a compressive strain of about 2e-3, and unbonded pairs start 2e-3 r apart;
 - bond breakage is checked by the runner between chunks of run.record_steps steps (run.extra
   ``liggghts_check_steps`` for a shorter check), not every step;
 - no smooth joint: joint pairs are plain contacts along the centre line (with the joint friction);
@@ -197,6 +199,9 @@ def approximations(run: SphereRun, variant):
         out.append("green-blue pairs are non-cohesive whichever joint they belong to")
     if variant == "clumps":
         out.append("bonded components are rigid bodies (fix rigid molecule): no bond deformation or breakage")
+    if variant == "bonds" and bond_gap(run) > 0:
+        out.append(f"contact radius r (1 - {bond_gap(run):g}) (masses kept): bonded pairs get the granular "
+                   f"contact only beyond a compressive strain of about {2 * bond_gap(run):g}")
         out.append("components with a fixed sphere are fixed as a whole")
     if len(run.joint_i) and run.smooth_joints:
         out.append("no smooth joint: joint pairs are plain contacts along the centre line (joint friction on "
@@ -212,6 +217,14 @@ def approximations(run: SphereRun, variant):
                    "velocities (also slows free fall: terminal velocity m g / gamma)"
                    + (f" instead of Cundall local damping {run.local_damping:g}" if run.local_damping > 0 else ""))
     return out
+
+
+def bond_gap(run):
+    """Relative radius reduction of the bonds variant (run.extra ``liggghts_bond_gap``, default 1e-3): LIGGGHTS
+    adds the granular contact to a bonded pair that overlaps, so touching bonded neighbours under compression
+    would be stiffer (kn_bond + kn) than in YADE or in-house; the contact radius r (1 - gap) leaves them a gap of
+    2 gap r (masses kept by the density), so the contact acts only beyond a compressive strain of about 2 gap."""
+    return float(run.extra.get("liggghts_bond_gap", 1e-3)) if run.n_bonds else 0.0
 
 
 def viscous_gamma(run):
@@ -277,6 +290,9 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     radii, density = run.radii, np.full(n, float(run.density))
     if variant == "sjkr":  # adhesion needs overlap: radii changed by SJKR_GROW[colour] d* (masses kept)
         radii = run.radii + SJKR_GROW[np.asarray(run.colour, np.int64)] * sjkr_overlap(run)
+        density = run.density * (run.radii / radii) ** 3
+    elif variant == "bonds" and bond_gap(run) > 0:  # bonded pairs keep clear of the granular contact
+        radii = run.radii * (1.0 - bond_gap(run))
         density = run.density * (run.radii / radii) ** 3
     write_data(folder / "data", run.centers, radii, density, types, mol, N_TYPES, box, bonds=bonds,
                title=f"{run.name} ({variant})")

@@ -98,12 +98,12 @@ def write_all(folder=HERE):
     files["column_model.toml"] = sgim_scene("column_model", "A 0.3 x 0.3 x 1.5 m column of bonded FCC spheres.",
                                             (0.0, 0.0, 0.0), (0.3, 0.3, 1.5), 0.05)
     files["column.toml"] = dda_scene(
-        "column", "The column hangs from its fixed top (z > 1.45); bonds are central springs (shear ratio "
+        "column", "The column hangs from its fixed top (z > 1.4); bonds are central springs (shear ratio "
         "1e-6); local damping 0.7 brings it to rest: its static elongation against the spring network's exact "
         "solution.", "column_model.toml", {"duration": 0.3, "record_every": 0.01, "local_damping": 0.7,
                                             "frames": 1},
         {"kn": 1e7, "ks": 5e6, "friction": 30.0},
-        {"density": 2600.0, "fixed": ["z>1.45"], "bond_young": 1e8, "bond_shear_ratio": 1e-6})
+        {"density": 2600.0, "fixed": ["z>1.4"], "bond_young": 1e8, "bond_shear_ratio": 1e-6})
     lo, hi, cavities = wedge_cavities()
     w = WEDGE
     discs = [dict(name=f"joint {n}", centre=[0.0, 0.0, 0.0], dip=d[0], dip_direction=d[1], radius=60.0,

@@ -103,7 +103,10 @@ def test_deck_holds_exactly_the_runs_bonds(tmp_path):
     atoms = sec["Atoms"]
     assert np.array_equal(atoms[:, 0], np.arange(1, run.n + 1))
     assert np.array_equal(atoms[:, 2:5], run.centers)                       # full precision
-    assert np.allclose(atoms[:, 5], 2 * run.radii, rtol=0, atol=0)
+    # contact diameters 2 r (1 - 1e-3) keep bonded neighbours clear of the granular contact; masses are kept
+    assert np.allclose(atoms[:, 5], 2 * run.radii * (1 - 1e-3), rtol=1e-15, atol=0)
+    mass = atoms[:, 6] * np.pi / 6 * atoms[:, 5] ** 3
+    assert np.allclose(mass, run.density * 4 / 3 * np.pi * run.radii ** 3, rtol=1e-12, atol=0)
     bonds = sec["Bonds"].astype(np.int64)
     # one type per bond, and the set of bonded pairs is the run's bond set, nothing more
     assert len(np.unique(bonds[:, 1])) == len(bonds)
