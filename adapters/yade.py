@@ -1,0 +1,203 @@
+"""YADE adapter: a bonded-sphere run (SphereRun) as a deck folder that ``yade -n -x`` runs headless.
+
+Deck (written by ``write_deck(run, folder)``; the deck writer saves ``run.npz`` beside it)::
+
+    DECK/run.npz     the SphereRun (arrays; no per-sphere code lines anywhere)
+    DECK/script.py   adapters/yade_script.py, run on YADE's own Python (numpy + json + yade only)
+    DECK/yade.json   deck settings: detection_factor (bonding-step detection, default 1.01, raised to
+                     cover the bond list's widest gap, at most 1.2), record_positions (default: when
+                     n x records <= 5e6), dump_bonds (write YADE's cohesive and smooth-joint pairs after the
+                     bonding step to OUT/yade_bonds.npz); the keywords of write_deck
+
+``run_deck(folder, out, np=1, timeout=None, progress=None)`` runs ``yade -n -f2 -x script.py DECK OUT``
+(``-j np`` for OpenMP threads), surfaces YADE's error line (or the script's ``FATAL:`` line) as an EngineError
+carrying the partial result (marked incomplete), and returns / saves the RunResult (engine "yade").
+
+Model: JCFpm (JCFpmMat, Ip2_JCFpmMat_JCFpmMat_JCFpmPhys, Law2_ScGeom_JCFpmPhys_JointedCohesiveFrictionalPM
+with smoothJoint). JCFpm rather than CohFrict because it is the YADE law with a joint concept: a pair cut by a
+zero-thickness joint becomes a smooth joint (normal force along the joint normal, sliding on the joint plane,
+joint friction), which CohFrict cannot express; its bonds are per-pair normal/shear springs with force
+limits, as the project's bond law. Bonds are created at the first step (detection enlarged by a factor
+slightly above 1, then reset), and then the exact per-pair rule of the run is applied from Python to every
+interaction: bond-list pairs keep a bond with their own kn, ks, tensile limit FnMax = bond_ft and shear limit
+FsMax = bond_fs (inf: 1e300); joint pairs (SphereRun.joint_i/j, with smooth_joints) are unbonded and become
+smooth joints with the run's per-pair normal (signed like the interaction normal id1 -> id2) and
+joint_friction_deg (one normal per pair: no three-joint limit); every other interaction is unbonded (a plain
+frictional contact). A bond-list pair without an interaction fails the run loudly.
+
+Unbonded contacts take kn, ks and friction from materials made per distinct radius with young = kn / r and
+poisson = ks / kn, so that JCFpm's kn = 2 E1 R1 E2 R2 / (E1 R1 + E2 R2) equals run.kn for every pair of radii
+and ks = poisson kn equals run.ks (exact, also for unequal radii). Fixed spheres have blockedDOFs xyzXYZ;
+gravity and Cundall's local damping by NewtonIntegrator (damping = run.local_damping); O.dt = run.dt.
+
+Approximations (also listed in RunResult.extra["approximations"]):
+- bond shear failure is Mohr-Coulomb in JCFpm: |Fs| > FsMax + Fn tan(friction) (Fn < 0 in tension lowers the
+  limit), where the in-house law breaks at |Fs| > bond_fs;
+- no viscous damping: neither at contacts (run.damping) nor on bonds;
+- bonds carry no bending or twisting moment (the shear force gives the torque at the contact point);
+- smooth joints exist for the model's joint pairs only (the pairs touching at the start): JCFpm switches a
+  joint pair off once it slid 2 min(r_i, r_j) along the joint (the script then erases it), and spheres that
+  meet across the joint later meet as plain frictional contacts (the in-house engine re-forms a joint pair
+  as a joint when its spheres overlap again). Interactions are kept while their spheres are apart
+  (neverErase), so that a joint pair opening for a moment stays a joint pair;
+- a bond broken in shear under compression stays a frictional contact whose zero-force distance is the
+  bond's rest distance (equal to touching for lattice packings).
+
+Several YADE processes may run at once: each opens its local servers (TCP 9000+, XMLRPC 21000+) by trying
+successive ports until a bind succeeds, so parallel runs do not clash.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from .process import EngineError, describe_failure, find_engine, run_process, unbuffered
+from .result import COMPLETE, INCOMPLETE, RunResult
+from .spec import SpecError, SphereRun
+
+SCRIPT = Path(__file__).with_name("yade_script.py")
+POS_LIMIT = 5_000_000  # record positions when n * records <= POS_LIMIT
+OUTPUTS = ("yade_setup.json", "yade_series.npz", "yade_snapshot.npz", "yade_pos.bin", "yade_final.npz",
+           "yade_bonds.npz")
+
+
+def approximations(run: SphereRun):
+    out = ["bond shear failure is Mohr-Coulomb in JCFpm: |Fs| > bond_fs + Fn tan(friction), Fn < 0 in tension",
+           "bonds carry no bending or twisting moment",
+           "no viscous bond damping"]
+    if run.damping > 0:
+        out.append(f"no viscous contact damping in JCFpm (run.damping = {run.damping:g} ignored)")
+    if run.smooth_joints and len(run.joint_i):
+        out.append("smooth joints only for the model's joint pairs: a pair that slid 2 min(r) along the joint is "
+                   "switched off, and spheres meeting across the joint later are plain frictional contacts")
+    return out
+
+
+def write_deck(run: SphereRun, folder, *, dump_bonds=False, detection_factor=1.01, record_positions=None):
+    """Write script.py and yade.json into `folder` (and run.npz when the caller has not); returns the extra
+    deck.json keys."""
+    folder = Path(folder)
+    if run.n == 0:
+        raise SpecError(f"{run.source or run.name}: the model has no spheres")
+    if not (np.isfinite(detection_factor) and 1.0 < detection_factor < 1.2):
+        raise ValueError(f"detection_factor must be in (1, 1.2) (got {detection_factor!r})")
+    folder.mkdir(parents=True, exist_ok=True)
+    if not (folder / "run.npz").exists():
+        run.save(folder / "run.npz")
+    records = run.steps // run.record_steps + 1
+    if record_positions is None:
+        record_positions = run.n * records <= POS_LIMIT
+    shutil.copyfile(SCRIPT, folder / "script.py")
+    cfg = {"detection_factor": float(detection_factor), "record_positions": bool(record_positions),
+           "dump_bonds": bool(dump_bonds)}
+    (folder / "yade.json").write_text(json.dumps(cfg, indent=1))
+    return {"files": ["run.npz", "script.py", "yade.json"], "yade": cfg, "approximations": approximations(run)}
+
+
+def _load(path):
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _result(folder, out, outcome, np_):
+    """RunResult from what the script wrote into `out` (complete when yade_final.npz is there and the
+    process ended well)."""
+    run = SphereRun.load(folder / "run.npz")
+    n, m = run.n, run.n_bonds
+    x0 = np.asarray(run.centers, float)
+    series = _load(out / "yade_series.npz") if (out / "yade_series.npz").exists() else None
+    t = np.asarray(series["time"], float) if series else np.zeros(0)
+    ser = {"kinetic": np.asarray(series["kinetic"], float),
+           "bonds_intact": np.asarray(series["bonds_intact"], np.int64)} if series else {}
+    pos = None
+    pb = out / "yade_pos.bin"
+    if pb.exists() and n:
+        raw = np.fromfile(pb, "<f8")
+        r = min(len(t), raw.size // (3 * n))
+        pos = raw[:r * 3 * n].reshape(r, n, 3)
+        t = t[:r] if pos is not None and len(t) > r else t
+        ser = {k: v[:len(t)] for k, v in ser.items()}
+    setup = json.loads((out / "yade_setup.json").read_text()) if (out / "yade_setup.json").exists() else {}
+    extra = {"approximations": approximations(run), "setup": setup, "threads": int(np_),
+             "log": str(out / "yade.log")}
+    final = out / "yade_final.npz"
+    if outcome.ok and final.exists():
+        f = _load(final)
+        extra["wall_run_s"] = float(f["wall_run"])
+        extra["cracks"] = {"tension": int(f["tens_cracks"]), "shear": int(f["shear_cracks"])}
+        return RunResult(engine="yade", x0=x0, final_pos=f["final_pos"], final_vel=f["final_vel"],
+                         bond_intact=f["bond_intact"].astype(bool), time=t, pos=pos, series=ser, status=COMPLETE,
+                         steps=int(f["steps"]), dt=run.dt, wall_s=outcome.wall_s, extra=extra)
+    # incomplete: the last snapshot (or the last recorded positions, or the initial state)
+    fp, fv, bi, steps = x0.copy(), np.zeros_like(x0), np.ones(m, bool), 0
+    snap = out / "yade_snapshot.npz"
+    if snap.exists():
+        s = _load(snap)
+        fp, fv, bi, steps = s["pos"], s["vel"], s["bond_intact"].astype(bool), int(s["steps"])
+        extra["final_from"] = f"snapshot at step {steps}"
+    if pos is not None and len(pos) and len(t) and t[-1] > steps * run.dt:
+        fp, steps = pos[-1].copy(), int(round(t[-1] / run.dt))
+        extra["final_from"] = f"record at step {steps} (velocities and bond states from the last snapshot)"
+    return RunResult(engine="yade", x0=x0, final_pos=fp, final_vel=fv, bond_intact=bi, time=t, pos=pos,
+                     series=ser, status=INCOMPLETE, steps=steps, dt=run.dt, wall_s=outcome.wall_s, extra=extra)
+
+
+def _on_line(progress, tag="yade"):
+    if progress is None:
+        return None
+
+    def cb(line):
+        if line.startswith("PROGRESS "):
+            progress(f"{tag}: " + line[len("PROGRESS "):])
+    return cb
+
+
+def run_script(exe, folder, out, outputs, np=1, timeout=None, progress=None, tag="yade"):
+    """Run ``yade -n -f2 [-j np] -x DECK/script.py DECK OUT`` (output files of an earlier run removed first);
+    returns (ProcessOutcome, log path). -f2: YADE's own logging shows errors only (CGAL polyhedra runs
+    otherwise print hundreds of thousands of warning lines)."""
+    out.mkdir(parents=True, exist_ok=True)
+    for name in outputs:
+        (out / name).unlink(missing_ok=True)
+    cmd = [exe, "-n", "-f2"] + (["-j", str(int(np))] if int(np) > 1 else []) + \
+          ["-x", str(folder / "script.py"), str(folder), str(out)]
+    log = out / f"{tag}.log"
+    outcome = run_process(unbuffered(cmd), cwd=out, log=log, timeout=timeout, on_line=_on_line(progress, tag))
+    return outcome, log
+
+
+def run_deck(folder, out, np=1, timeout=None, progress=None) -> RunResult:
+    """Run a YADE sphere deck; returns the RunResult (also saved into `out`). EngineError on failure (with
+    the partial result, marked incomplete and saved into `out`)."""
+    exe = find_engine("yade")
+    folder, out = Path(folder).resolve(), Path(out).resolve()
+    for need in ("script.py", "run.npz", "yade.json"):
+        if not (folder / need).exists():
+            raise EngineError(f"yade: {folder}: not a YADE sphere deck (missing {need})")
+    outcome, log = run_script(exe, folder, out, OUTPUTS, np=np, timeout=timeout, progress=progress)
+    res = _result(folder, out, outcome, np)
+    if not res.complete:
+        res.message = describe_failure("yade", outcome, log) if not outcome.ok else \
+            f"yade: the script ended without writing its final results (log {log})"
+        res.save(out)
+        raise EngineError(res.message, result=res)
+    res.save(out)
+    return res
+
+
+__all__ = ["write_deck", "run_deck", "approximations", "write_polyhedra_deck", "run_polyhedra_deck"]
+
+
+def write_polyhedra_deck(scene_path, folder, **kw):
+    from .yade_poly import write_polyhedra_deck as w
+
+    return w(scene_path, folder, **kw)
+
+
+def run_polyhedra_deck(folder, out, np=1, timeout=None, progress=None):
+    from .yade_poly import run_polyhedra_deck as r
+
+    return r(folder, out, np=np, timeout=timeout, progress=progress)
