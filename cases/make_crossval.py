@@ -46,10 +46,10 @@ def _table(name, d, array=False):
     return "\n".join([head] + [f"{k} = {_fmt(v)}" for k, v in d.items()]) + "\n"
 
 
-def sgim_scene(name, comment, lo, hi, radius, discs=(), cavities=()):
+def sgim_scene(name, comment, lo, hi, radius, discs=(), cavities=(), rule="colour"):
     parts = [f"# {comment}\n# Written by cases/make_crossval.py.\n", f'name = "{name}"\n',
              _table("domain", {"min": list(lo), "max": list(hi)}),
-             _table("packing", {"kind": "fcc", "radius": radius}), _table("bonds", {"rule": "colour"})]
+             _table("packing", {"kind": "fcc", "radius": radius}), _table("bonds", {"rule": rule})]
     parts += [_table("discontinuity", d, True) for d in discs]
     parts += [_table("cavity", c, True) for c in cavities]
     return "\n".join(parts)
@@ -110,8 +110,11 @@ def write_all(folder=HERE):
                   thickness=0.0) for n, d in (("A", w["joint_a"]), ("B", w["joint_b"]))]
     files["wedge_model.toml"] = sgim_scene(
         "wedge_model", "The paper's wedge (joints A 45/005, B 55/135, face 65/065, height 10 m) in FCC spheres, "
-        "r = 0.5; the air in front of the face and the rock deeper than 1.5 m below the joints are cavities.", np.round(lo, 6).tolist(), np.round(hi, 6).tolist(),
-        w["radius"], discs, cavities)
+        "r = 0.5; the air in front of the face and the rock deeper than 1.5 m below the joints are cavities. "
+        "Geometric bond rule: near the line of intersection a sphere is on one side of each joint, and only the "
+        "pair's own crossing decides (with the colour rule, a single colour per sphere keeps 31 bonds across A "
+        "where both spheres lie on the same side of B).", np.round(lo, 6).tolist(), np.round(hi, 6).tolist(),
+        w["radius"], discs, cavities, rule="geometric")
     files["wedge.toml"] = dda_scene(
         "wedge", "The wedge's spheres are bonded; the rock below either joint is fixed; the joints are smooth. "
         "At joint friction 18 deg (below the critical 19.7 deg) it slides; `cases crossval` finds the onset.",
@@ -120,6 +123,16 @@ def write_all(folder=HERE):
         {"density": 2600.0, "bond_young": 1e9, "fixed_below": [[*w["joint_a"], 0.0, 0.0, 0.0],
                                                                [*w["joint_b"], 0.0, 0.0, 0.0]],
          "smooth_joints": True, "joint_friction": 18.0})
+    files["block_wedge.toml"] = "\n".join([
+        "# The paper's wedge as one DDA block on three fixed blocks at friction 10 deg, well below the critical\n"
+        "# 19.7 deg: it slides 1/2 g sin(psi5) (1 - tan(phi) / tan(phi_c)) t^2 along the line of intersection.\n"
+        "# (At 18 deg the distance is ill-conditioned: 1 % on tan(phi_c) is 10 % on the acceleration.)\n"
+        "# Written by cases/make_crossval.py.\n", 'name = "block_wedge"\n',
+        _table("simulation", {"duration": 1.0, "safety": 0.5, "record_every": 0.01, "frames": 1}),
+        _table("contact", {"kn": 1e10, "friction": 10.0, "damping": 0.1}),
+        _table("material", {"name": "rock", "density": 2600.0}, True),
+        _table("generate", {"kind": "wedge", "joint_a": list(w["joint_a"]), "joint_b": list(w["joint_b"]),
+                            "face": list(w["face"]), "height": w["height"]}, True)])
     for name, text in files.items():
         (folder / name).write_text(text)
     return sorted(files)
