@@ -10,7 +10,7 @@ The excavating surface is given as points along the bench toes and crests, the
 ramp edges, the pit rim and a terrain grid; SGIM triangulates them in plan view
 (the paper's way of entering excavating faces).
 
-    python -m cases.make_open_pit          # rewrites cases/open_pit.toml
+    python -m cases.make_open_pit          # rewrites cases/open_pit.toml and cases/open_pit_coarse.toml
 """
 from __future__ import annotations
 
@@ -145,20 +145,29 @@ def discontinuities():
     return out
 
 
-def toml_text():
+COARSE_HEADER = [
+    "# The open pit of cases/open_pit.toml at r = 2.5 m in FCC packing (written by cases/make_open_pit.py):",
+    "# about 80 000 spheres, a size YADE and LIGGGHTS run (cases/open_pit_deck.toml; central-spring bonds",
+    "# need a packing that is not a mechanism, hence FCC).",
+]
+
+
+def toml_text(name="open_pit", kind="cubic", radius=0.5, header=None):
     lines = [
-        "# The SGIM paper's section 4 example at the paper's scale (written by cases/make_open_pit.py).",
-        "# Open-pit slope in a hill landform: 7 benches of 15 m, faces 65 deg, 8 m berms, a spiral ramp,",
-        "# two perpendicular joint sets (zero thickness: green / blue) and a 4 m fault (red).",
-        'name = "open_pit"',
+        *(header or [
+            "# The SGIM paper's section 4 example at the paper's scale (written by cases/make_open_pit.py).",
+            "# Open-pit slope in a hill landform: 7 benches of 15 m, faces 65 deg, 8 m berms, a spiral ramp,",
+            "# two perpendicular joint sets (zero thickness: green / blue) and a 4 m fault (red).",
+        ]),
+        f'name = "{name}"',
         "",
         "[domain]",
         f"min = {list(BOX[0])}",
         f"max = {list(BOX[1])}",
         "",
         "[packing]",
-        'kind = "cubic"',
-        "radius = 0.5",
+        f'kind = "{kind}"',
+        f"radius = {radius}",
         "",
         "[bonds]",
         'rule = "colour"',
@@ -193,9 +202,11 @@ def excavation_lines():
 
 
 def main():
-    path = Path(__file__).with_name("open_pit.toml")
-    path.write_text(toml_text())
-    print(f"wrote {path}")
+    here = Path(__file__).parent
+    for path, text in ((here / "open_pit.toml", toml_text()),
+                       (here / "open_pit_coarse.toml", toml_text("open_pit_coarse", "fcc", 2.5, COARSE_HEADER))):
+        path.write_text(text)
+        print(f"wrote {path}")
 
 
 if __name__ == "__main__":
