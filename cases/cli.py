@@ -1,9 +1,10 @@
-"""Command line: ``cases crossval [...]`` (the cross-validation table, cases/crossval.py)."""
+"""Command line: ``cases crossval [...]`` (the cross-validation table, cases/crossval.py), ``cases study [...]``
+(batch studies, cases/study.py)."""
 from __future__ import annotations
 
 import sys
 
-COMMANDS = {"crossval": "cases.crossval"}
+COMMANDS = {"crossval": "cases.crossval", "study": "cases.study"}
 
 
 def main(argv=None):
