@@ -89,6 +89,10 @@ def main(argv=None):
     except (SceneError, DeckError, SpecError, CliError) as exc:
         print(f"adapters: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        from sgim.cli import reader_gone
+
+        return reader_gone()
     except EngineError as exc:
         print(f"adapters: error: {exc}", file=sys.stderr)
         if exc.result is not None:

@@ -682,6 +682,10 @@ def main(argv=None):
     except (SceneError, CliError) as exc:
         print(f"cases study: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        from sgim.cli import reader_gone
+
+        return reader_gone()
     except KeyboardInterrupt:
         print("cases study: interrupted: the finished cases are in the table (run the same command again to "
               "finish)", file=sys.stderr)

@@ -21,6 +21,14 @@ class CliError(Exception):
     """One-line error for the user (exit status 2)."""
 
 
+def reader_gone():
+    """After a BrokenPipeError on stdout (the reader, e.g. `head`, closed the pipe): point stdout at devnull so
+    that the interpreter's final flush does not fail too; the command then ends quietly with status 0."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    return 0
+
+
 def _progress(quiet):
     if quiet:
         return None
@@ -248,6 +256,8 @@ def main(argv=None):
     except (SceneError, CliError) as exc:
         print(f"sgim: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        return reader_gone()
 
 
 if __name__ == "__main__":
