@@ -131,7 +131,7 @@ def _sphere_set(run: SphereRun):
     ss.bond_kn, ss.bond_ks = run.bond_kn.astype(float), run.bond_ks.astype(float)
     ss.bond_ft, ss.bond_fs = run.bond_ft.astype(float), run.bond_fs.astype(float)
     ss.bond_zeta = np.zeros(run.n_bonds)
-    if run.smooth_joints and len(run.joint_i) and hasattr(ss, "add_joints"):
+    if run.smooth_joints and len(run.joint_i):
         ss.add_joints(np.c_[run.joint_i, run.joint_j], run.joint_normal, run.joint_friction_deg)
     return ss
 
@@ -140,44 +140,7 @@ def _sphere_set(run: SphereRun):
 def joint_pairs(model):
     """(pair index into model.bonds, discontinuity index, unit normal i -> j) of every touching pair that the
     model marks cut by a zero-thickness discontinuity (a joint disc or a triangulated joint surface)."""
-    bonds = np.asarray(model.bonds, np.int64).reshape(-1, 2)
-    cut_by = np.asarray(model.cut_by)
-    nd = len(model.disc_radius)
-    surf = model.surfaces or {}
-    s_index = np.asarray(surf.get("surf_index", np.zeros(0, int)))
-    s_thick = np.asarray(surf.get("surf_thickness", np.zeros(0)))
-    thickness = np.full(nd + len(s_index), np.inf)
-    thickness[:nd] = model.disc_thickness
-    for k, d in enumerate(s_index):
-        thickness[int(d)] = s_thick[k]
-    cut = np.flatnonzero(~np.asarray(model.bonded, bool) & (cut_by >= 0))
-    d = cut_by[cut]
-    keep = thickness[d] == 0.0
-    cut, d = cut[keep], d[keep]
-    normal = np.zeros((len(cut), 3))
-    on_disc = d < nd
-    normal[on_disc] = np.asarray(model.disc_normal)[d[on_disc]]
-    if np.any(~on_disc):
-        from sgim.meshquery import TriMesh
-
-        c = np.asarray(model.centers)
-        vs, fs = surf["surf_vertex_start"], surf["surf_face_start"]
-        for k, dk in enumerate(s_index):
-            sel = np.flatnonzero(d == dk)
-            if not len(sel):
-                continue
-            V = surf["surf_vertices"][vs[k]:vs[k + 1]]
-            F = surf["surf_faces"][fs[k]:fs[k + 1]] - vs[k]
-            mesh = TriMesh(V, F)
-            mid = 0.5 * (c[bonds[cut[sel], 0]] + c[bonds[cut[sel], 1]])
-            face = mesh.closest(mid)[2]
-            t = mesh.vertices[mesh.faces[face]]
-            nrm = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-            normal[sel] = nrm / np.linalg.norm(nrm, axis=1)[:, None]
-    c = np.asarray(model.centers)
-    dx = c[bonds[cut, 1]] - c[bonds[cut, 0]]
-    normal *= np.where(np.einsum("ij,ij->i", normal, dx) < 0, -1.0, 1.0)[:, None]
-    return cut, d, normal
+    return model.joint_pairs()
 
 
 def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None, friction_deg=30.0,

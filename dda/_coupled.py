@@ -7,8 +7,8 @@ never returns to Python between steps). One coupled step i:
 
 1. world geometry of the moving blocks at x(i) (as run_chunk computes it);
 2. ``sphere_forces``: hashed sphere grid (cells of the largest sphere diameter, counting sort, linear in the
-   spheres), sphere-sphere contacts without an intact bond, sphere-block contacts and bonds. Sphere-block
-   candidates come from the block engine's own grids (moving blocks, static blocks, short list of large
+   spheres), sphere-sphere contacts without an intact bond, smooth joints (dda/_spheres.py ``_joints``),
+   sphere-block contacts and bonds. Sphere-block candidates come from the block engine's own grids (moving blocks, static blocks, short list of large
    blocks): each sphere looks up the cells its box covers, so the cost follows the spheres and the blocks
    near them, never spheres x blocks. A sphere touches a block at the closest point of the convex polyhedron
    (face, edge or vertex); the block contact law acts at that point; the block takes the reaction there
@@ -28,7 +28,7 @@ from ._broad import _hash
 from ._contact import point_force
 from ._deform import add_strain_force, body_point, deform_geometry, point_velocity
 from ._integrate import _omega, quat_matrix, run_chunk, update_geometry
-from ._spheres import _cell_hash, _contact, _hkey, bond_lookup, closest_on_polyhedron
+from ._spheres import _cell_hash, _contact, _hkey, _joints, bond_lookup, closest_on_polyhedron
 
 OK, NEED_CAPACITY, BLOWUP, NEED_BLOCK_CAPACITY = 0, 1, 2, 3
 
@@ -214,6 +214,7 @@ def _bonds(dt, t, x, v, w, r, m, fixed, kin, bi, bj, b_len0, b_kn, b_ks, b_ft, b
 @njit(cache=True)
 def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
                   bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break, bkey_tab, bkey_slot,
+                  ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
                   active, bpos, bvel, bquat, bangmom, bmass, binertia, bfixed, bkin, bwpres, bdof12, bstrain, bsrate,
                   bwb, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb, fvs, fv,
                   S_b, margin, mstart, mentries, fstart, fentries, large_list, bstamp, btag,
@@ -289,6 +290,8 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
         htab[h] = s
     bmask = bkey_tab.shape[0] - 1
     nbond = bi.shape[0]
+    jmask = jkey_tab.shape[0] - 1
+    njoint = ji.shape[0]
     nnew = 0
     rs3 = np.zeros(3)
     # sphere-sphere
@@ -323,6 +326,8 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
                             kb = bond_lookup(bkey_tab, bkey_slot, key, bmask)
                             if kb >= 0 and b_intact[kb]:
                                 continue
+                        if njoint > 0 and bond_lookup(jkey_tab, jkey_slot, key, jmask) >= 0:
+                            continue  # a smooth joint (below)
                         dl = np.sqrt(dd)
                         depth = rs - dl
                         nx = d0 / dl
@@ -417,6 +422,9 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
         return NEED_CAPACITY
     c_n[new] = nnew
     cur[0] = new
+    if njoint > 0:
+        stats[6] = _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us,
+                           j_sgn, force, rs3)
     res[0] = rs3[0]
     res[1] = rs3[1]
     res[2] = rs3[2]
@@ -484,6 +492,7 @@ def sphere_update(dt, dt_prev, gravity, local_damp, x, v, w, m, inertia, fixed, 
 def run_coupled(nsteps, resume, dt, dt_prev, t0, gravity, local_damp, first_step,
                 x, v, w, r, m, sinertia, sfixed, skin, sbforce, lawrow, blawrow,
                 bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break, bkey_tab, bkey_slot,
+                ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
                 scur, sc_n, sc_key, sc_us, sc_fn, sc_ij, shtab, sforce, storque, sacc, senergy, sres, sstats,
                 fvs, fv, bstamp, btag,
                 pos, vel, quat, angmom, mass, inertia, fixed, material, active,
@@ -506,7 +515,8 @@ def run_coupled(nsteps, resume, dt, dt_prev, t0, gravity, local_damp, first_step
         if not (resume and step == 0):
             st = sphere_forces(dt, t, x, v, w, r, m, sfixed, skin, lawrow, blawrow,
                                bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break,
-                               bkey_tab, bkey_slot, active, pos, vel, quat, angmom, mass, inertia, fixed, kin, wpres,
+                               bkey_tab, bkey_slot, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn,
+                               jkey_tab, jkey_slot, active, pos, vel, quat, angmom, mass, inertia, fixed, kin, wpres,
                                dof12, strain, srate, wb, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb, fvs, fv,
                                S, margin, mstart, mentries, fstart, fentries, large_list, bstamp, btag,
                                scur, sc_n, sc_key, sc_us, sc_fn, sc_ij, shtab, sforce, storque, fext, text, qext,

@@ -7,19 +7,28 @@ by their world vertices, face planes and face vertex loops.
 
 One step (central difference exactly as the block engine, dt(0) = 0 so the first step is a half step):
 
-1. grid: cubic cells of the largest sphere diameter, hashed into 2^k buckets (counting sort, rebuilt each step:
-   cost linear in the sphere count); each sphere looks at the 27 cells around it, pairs i < j;
-2. sphere-sphere contacts (overlap r_i + r_j - |x_j - x_i|) of pairs without an intact bond, sphere-wall
-   contacts (closest point of the convex polyhedron: a face, an edge or a vertex; a centre inside the wall
-   bears on the face it is nearest to), both with the block engine's contact law (dda/_contact.py) at one
-   contact point; the shear history of each contact is kept between steps (hash on the pair key);
-3. bonds: a normal spring kn_b on the change of the centre distance from its initial value (tension and
+1. pair list (Verlet list): the pairs i < j closer than r_i + r_j + skin, found on a hashed grid of cells
+   2 r_max + skin (counting sort: cost linear in the sphere count), without the pairs of an intact bond, the
+   smooth-joint pairs and the pairs of two fixed spheres; rebuilt only when a sphere has moved more than
+   skin / 2 since the last build (a bond that breaks joins the list at once);
+2. sphere-sphere contacts (overlap r_i + r_j - |x_j - x_i|) of the listed pairs, sphere-wall contacts (closest
+   point of the convex polyhedron: a face, an edge or a vertex; a centre inside the wall bears on the face it
+   is nearest to), both with the block engine's contact law (dda/_contact.py) at one contact point; the shear
+   history of each contact is kept between steps (hash on the pair key);
+3. smooth joints (``_joints``, YADE JCFpm's smoothJoint): the pairs cut by a joint act along the joint normal
+   with the joint friction, see ``_joints``;
+4. bonds: a normal spring kn_b on the change of the centre distance from its initial value (tension and
    compression) and a shear spring ks_b on the incremental tangential displacement at the bond point; a bond
    breaks when its tensile force would exceed its tensile strength or its shear force its shear strength;
    the energy left in its springs is released (counted as dissipated); the step it broke is recorded;
-4. central difference for the free spheres (Cundall's local damping as an option).
-Energy = [kinetic (product form), potential, elastic (contacts and bonds), friction (+ released), damping,
-local damping]; the last three cumulative.
+5. central difference for the free spheres (Cundall's local damping as an option).
+Energy = [kinetic (product form), potential, elastic (contacts, joints and bonds), friction (+ released),
+damping, local damping]; the last three cumulative.
+
+Memory layout of the hot loop: the sphere state is copied into one row per sphere (``P``: position, velocity,
+angular velocity, force, torque) for the duration of a call, and the bond constants and state live in one
+row per bond (``BB``: rest length, kn, ks, tensile and shear force, damping ratio, shear displacement, normal
+force, r_i / (r_i + r_j)), so that a bond touches two sphere rows and one bond row.
 """
 from __future__ import annotations
 
@@ -28,7 +37,10 @@ from numba import njit
 
 from ._contact import point_force
 
-OK, NEED_CAPACITY, BLOWUP = 0, 1, 2
+OK, NEED_CAPACITY, BLOWUP, NEED_PAIRS = 0, 1, 2, 3
+# LLVM may fuse multiply-adds, reassociate sums and use reciprocals (round-off changes only); no "nnan"/"ninf",
+# so the non-finite checks of the blow-up test stay exact
+SAFE_FAST = {"contract", "reassoc", "nsz", "arcp"}
 
 
 @njit(cache=True)
@@ -221,29 +233,18 @@ def _contact(i, j, is_wall, key, depth, nx, ny, nz, px, py, pz, x, v, w, m, fixe
 
 
 @njit(cache=True)
-def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
-                x, v, w, r, m, inertia, fixed, kin, bforce, lawrow, wall_lawrow,
-                bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break, bkey_tab, bkey_slot,
-                wvert, wfn, wfd, wfv_start, wfv, wface_start, waabb,
-                cur, c_n, c_key, c_us, c_fn, c_ij, htab, energy, acc, stats):
-    """Advance `nsteps` steps. Returns (status, steps done). See the module docstring.
-
-    Contact buffers c_* are (2, cap, ...) double buffers, ``cur[0]`` the one holding last step's contacts.
-    ``acc = [work of the prescribed spheres]``; ``stats = [contacts, wall contacts, intact bonds, broken this
-    chunk, pairs needed]``; ``b_break`` gets the time a bond broke."""
+def build_pairs(x, r, fixed, kin, skin, bstart, bnbr, bidx, b_intact, jkey_tab, jkey_slot, njoint, out):
+    """Verlet pair list: every pair i < j closer than r_i + r_j + skin, except pairs of two fixed or prescribed
+    spheres, pairs with an intact bond and smooth-joint pairs (both handled by their own loops). Hashed grid of
+    cells 2 r_max + skin (counting sort, linear in the spheres; a candidate counts only from its own cell, so
+    buckets shared by several cells need no bookkeeping). Bonds of sphere i: bnbr[bstart[i]:bstart[i + 1]]
+    (partners j > i, bond indices bidx). Writes up to len(out) pairs; returns the number of pairs found (more
+    than len(out): the caller grows `out` and calls again)."""
     n = x.shape[0]
-    nbond = bi.shape[0]
-    nwall = waabb.shape[0]
-    cap = c_key.shape[1]
-    force = np.zeros((n, 3))
-    torque = np.zeros((n, 3))
-    res = np.zeros(3)
-    cpt = np.empty(3)
-    c = np.empty(3)
     rmax = 0.0
     for i in range(n):
         rmax = max(rmax, r[i])
-    S = 2.0 * rmax * 1.0001
+    S = (2.0 * rmax + skin) * 1.0001
     nbk = 16
     while nbk < 2 * n:
         nbk *= 2
@@ -253,27 +254,193 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
     fill = np.empty(nbk, np.int64)
     cell = np.empty(n, np.int64)
     cix = np.empty((n, 3), np.int64)
-    seen = np.empty(27, np.int64)
-    bmask = bkey_tab.shape[0] - 1
+    for i in range(n):
+        for a in range(3):
+            cix[i, a] = np.int64(np.floor(x[i, a] / S))
+        cell[i] = _cell_hash(cix[i, 0], cix[i, 1], cix[i, 2], cmask)
+        count[cell[i] + 1] += 1
+    for b in range(nbk):
+        count[b + 1] += count[b]
+    for b in range(nbk):
+        fill[b] = count[b]
+    for i in range(n):
+        entries[fill[cell[i]]] = i
+        fill[cell[i]] += 1
+    jmask = jkey_tab.shape[0] - 1
+    cap = out.shape[0]
+    npair = 0
+    for i in range(n):
+        si = fixed[i] or kin[i]
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                for dz in range(-1, 2):
+                    cx = cix[i, 0] + dx
+                    cy = cix[i, 1] + dy
+                    cz = cix[i, 2] + dz
+                    hb = _cell_hash(cx, cy, cz, cmask)
+                    for e in range(count[hb], count[hb + 1]):
+                        j = entries[e]
+                        if j <= i:
+                            continue
+                        if cix[j, 0] != cx or cix[j, 1] != cy or cix[j, 2] != cz:
+                            continue
+                        if si and (fixed[j] or kin[j]):
+                            continue
+                        d0 = x[j, 0] - x[i, 0]
+                        d1 = x[j, 1] - x[i, 1]
+                        d2 = x[j, 2] - x[i, 2]
+                        rs = r[i] + r[j] + skin
+                        if d0 * d0 + d1 * d1 + d2 * d2 >= rs * rs:
+                            continue
+                        bonded = False
+                        for q in range(bstart[i], bstart[i + 1]):
+                            if bnbr[q] == j:
+                                bonded = b_intact[bidx[q]]
+                                break
+                        if bonded:
+                            continue
+                        if njoint > 0:
+                            if bond_lookup(jkey_tab, jkey_slot, i * n + j, jmask) >= 0:
+                                continue
+                        if npair < cap:
+                            out[npair, 0] = i
+                            out[npair, 1] = j
+                        npair += 1
+    return npair
+
+
+@njit(cache=True)
+def _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn,
+            force, res):
+    """Smooth joints (as YADE's JCFpm smoothJoint): the pair's contact acts along the joint normal n, not the
+    centre line. A joint contact forms when the spheres overlap (or at t = 0 for touching pairs, set by the
+    caller) with the reference gap initD = |(x_j - x_i).n|; then D = initD - |(x_j - x_i).n| is its normal
+    overlap (force kn D along +-n while D >= 0, the sign that n had at formation), the shear spring takes the
+    centre velocity difference in the joint plane (no rotation, no torque), Coulomb friction tan(phi_joint);
+    the contact is lost when D < 0 or after a cumulative sliding of 2 min(r_i, r_j). Returns active joints."""
+    nact = 0
+    n = np.empty(3)
+    vrel = np.empty(3)
+    f = np.empty(3)
+    us = np.empty(3)
+    for k in range(ji.shape[0]):
+        i = ji[k]
+        j = jj[k]
+        d0 = x[j, 0] - x[i, 0]
+        d1 = x[j, 1] - x[i, 1]
+        d2 = x[j, 2] - x[i, 2]
+        dn = d0 * j_nrm[k, 0] + d1 * j_nrm[k, 1] + d2 * j_nrm[k, 2]
+        if j_on[k]:
+            if j_slide[k] > 2.0 * min(r[i], r[j]):
+                # slid past its neighbour: lost, its shear energy released
+                res[1] += 0.5 * lawrow[1] * (j_us[k, 0] ** 2 + j_us[k, 1] ** 2 + j_us[k, 2] ** 2)
+                j_on[k] = False
+                j_us[k, 0] = 0.0
+                j_us[k, 1] = 0.0
+                j_us[k, 2] = 0.0
+                continue
+        else:
+            rs = r[i] + r[j]
+            if d0 * d0 + d1 * d1 + d2 * d2 >= rs * rs:
+                continue
+            j_on[k] = True
+            j_init[k] = abs(dn)
+            j_slide[k] = 0.0
+            j_sgn[k] = 1.0 if dn >= 0.0 else -1.0
+            j_us[k, 0] = 0.0
+            j_us[k, 1] = 0.0
+            j_us[k, 2] = 0.0
+        depth = j_init[k] - abs(dn)
+        for a in range(3):
+            n[a] = j_sgn[k] * j_nrm[k, a]
+            vrel[a] = v[j, a] - v[i, a]
+            us[a] = j_us[k, a]
+        vn = vrel[0] * n[0] + vrel[1] * n[1] + vrel[2] * n[2]
+        si = fixed[i] or kin[i]
+        sj = fixed[j] or kin[j]
+        if si and not sj:
+            meff = m[j]
+        elif sj and not si:
+            meff = m[i]
+        else:
+            meff = m[i] * m[j] / (m[i] + m[j])
+        st, bnd, fn_el, ee, df, dd = point_force(lawrow[0], lawrow[1], j_tan[k], 0.0, 0.0, lawrow[5], meff, depth,
+                                                 n, vrel, dt, us, False, f)
+        res[0] += ee
+        res[1] += df
+        res[2] += dd
+        for a in range(3):
+            j_us[k, a] = us[a]
+        if st == 0:
+            j_on[k] = False
+            continue
+        j_slide[k] += np.sqrt((vrel[0] - vn * n[0]) ** 2 + (vrel[1] - vn * n[1]) ** 2
+                              + (vrel[2] - vn * n[2]) ** 2) * dt
+        nact += 1
+        for a in range(3):
+            force[j, a] += f[a]
+            force[i, a] -= f[a]
+    return nact
+
+
+@njit(cache=True, fastmath=SAFE_FAST)
+def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
+                x, v, w, r, m, inertia, fixed, kin, bforce, lawrow, wall_lawrow,
+                bi, bj, BB, b_intact, b_break, bstart, bnbr, bidx,
+                ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
+                wvert, wfn, wfd, wfv_start, wfv, wface_start, waabb,
+                nl_pairs, nl_n, nl_flag, x_ref, skin, P,
+                cur, c_n, c_key, c_us, c_fn, c_ij, htab, energy, acc, stats):
+    """Advance `nsteps` steps. Returns (status, steps done). See the module docstring.
+
+    Contact buffers c_* are (2, cap, ...) double buffers, ``cur[0]`` the one holding last step's contacts.
+    Pair list: ``nl_pairs[:nl_n[0]]`` built at ``x_ref`` with margin ``skin``; ``nl_flag[0] = 1`` asks for a
+    rebuild (set when a sphere has moved by more than skin / 2 since, or a broken bond does not fit the list).
+    ``acc = [work of the prescribed spheres]``; ``stats = [contacts, wall contacts, intact bonds, broken this
+    chunk, contacts needed, pairs needed, active joints, pair-list builds]``; ``b_break`` gets the time a
+    bond broke."""
+    n = x.shape[0]
+    nbond = bi.shape[0]
+    njoint = ji.shape[0]
+    nwall = waabb.shape[0]
+    cap = c_key.shape[1]
+    ncap = nl_pairs.shape[0]
+    # one row per sphere in P (position, velocity, angular velocity, force, torque: copied in here and out at
+    # the end) and per bond in BB (length, kn, ks, ft, fs, damping ratio, shear displacement (3), normal force,
+    # r_i / (r_i + r_j)): the bond loop reads and writes two sphere rows and one bond row
+    for i in range(n):
+        for a in range(3):
+            P[i, a] = x[i, a]
+            P[i, 3 + a] = v[i, a]
+            P[i, 6 + a] = w[i, a]
+    X = P[:, 0:3]
+    V = P[:, 3:6]
+    W = P[:, 6:9]
+    force = P[:, 9:12]
+    torque = P[:, 12:15]
+    res = np.zeros(3)
+    cpt = np.empty(3)
+    c = np.empty(3)
+    half2 = 0.25 * skin * skin
     status = OK
     done = 0
     nbroken = 0
     t = t0
     for step in range(nsteps):
-        # 1. grid (counting sort into hashed buckets)
-        count[:] = 0
-        for i in range(n):
-            for a in range(3):
-                cix[i, a] = np.int64(np.floor(x[i, a] / S))
-            cell[i] = _cell_hash(cix[i, 0], cix[i, 1], cix[i, 2], cmask)
-            count[cell[i] + 1] += 1
-        for b in range(nbk):
-            count[b + 1] += count[b]
-        for b in range(nbk):
-            fill[b] = count[b]
-        for i in range(n):
-            entries[fill[cell[i]]] = i
-            fill[cell[i]] += 1
+        # 1. pair list (rebuilt only when a sphere may have come within reach of a new neighbour)
+        if nl_flag[0] != 0:
+            npair = build_pairs(X, r, fixed, kin, skin, bstart, bnbr, bidx, b_intact, jkey_tab, jkey_slot, njoint,
+                                nl_pairs)
+            if npair > ncap:
+                status = NEED_PAIRS
+                stats[5] = npair
+                break
+            nl_n[0] = npair
+            for i in range(n):
+                for a in range(3):
+                    x_ref[i, a] = X[i, a]
+            nl_flag[0] = 0
+            stats[7] += 1
         old = cur[0]
         new = 1 - old
         nold = c_n[old]
@@ -294,61 +461,41 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
         res[:] = 0.0
         nnew = 0
         nwc = 0
-        # 2. sphere-sphere contacts
-        for i in range(n):
-            ns = 0
-            for dx in range(-1, 2):
-                for dy in range(-1, 2):
-                    for dz in range(-1, 2):
-                        hb = _cell_hash(cix[i, 0] + dx, cix[i, 1] + dy, cix[i, 2] + dz, cmask)
-                        dup = False
-                        for q in range(ns):
-                            if seen[q] == hb:
-                                dup = True
-                                break
-                        if dup:
-                            continue
-                        seen[ns] = hb
-                        ns += 1
-                        for e in range(count[hb], count[hb + 1]):
-                            j = entries[e]
-                            if j <= i:
-                                continue
-                            if (fixed[i] or kin[i]) and (fixed[j] or kin[j]):
-                                continue
-                            d0 = x[j, 0] - x[i, 0]
-                            d1 = x[j, 1] - x[i, 1]
-                            d2 = x[j, 2] - x[i, 2]
-                            dd = d0 * d0 + d1 * d1 + d2 * d2
-                            rs = r[i] + r[j]
-                            if dd >= rs * rs or dd == 0.0:
-                                continue
-                            key = i * n + j
-                            if nbond > 0:
-                                kb = bond_lookup(bkey_tab, bkey_slot, key, bmask)
-                                if kb >= 0 and b_intact[kb]:
-                                    continue
-                            dl = np.sqrt(dd)
-                            depth = rs - dl
-                            nx = d0 / dl
-                            ny = d1 / dl
-                            nz = d2 / dl
-                            a0 = r[i] - 0.5 * depth
-                            nnew = _contact(i, j, False, key, depth, nx, ny, nz, x[i, 0] + a0 * nx,
-                                            x[i, 1] + a0 * ny, x[i, 2] + a0 * nz, x, v, w, m, fixed, kin, lawrow,
-                                            dt, c_key[old], c_us[old], htab, hmask, nold, c_key[new], c_us[new],
-                                            c_fn[new], c_ij[new], nnew, force, torque, res)
+        # 2. sphere-sphere contacts over the pair list
+        for p in range(nl_n[0]):
+            i = nl_pairs[p, 0]
+            j = nl_pairs[p, 1]
+            d0 = X[j, 0] - X[i, 0]
+            d1 = X[j, 1] - X[i, 1]
+            d2 = X[j, 2] - X[i, 2]
+            dd = d0 * d0 + d1 * d1 + d2 * d2
+            rs = r[i] + r[j]
+            if dd >= rs * rs or dd == 0.0:
+                continue
+            key = i * n + j
+            dl = np.sqrt(dd)
+            depth = rs - dl
+            nx = d0 / dl
+            ny = d1 / dl
+            nz = d2 / dl
+            a0 = r[i] - 0.5 * depth
+            nnew = _contact(i, j, False, key, depth, nx, ny, nz, X[i, 0] + a0 * nx,
+                            X[i, 1] + a0 * ny, X[i, 2] + a0 * nz, X, V, W, m, fixed, kin, lawrow,
+                            dt, c_key[old], c_us[old], htab, hmask, nold, c_key[new], c_us[new],
+                            c_fn[new], c_ij[new], nnew, force, torque, res)
         # sphere-wall contacts (walls are few: each tested by its box)
         for j in range(n):
+            if nwall == 0:
+                break
             if fixed[j] or kin[j]:
                 continue
             for k in range(nwall):
-                if (x[j, 0] + r[j] < waabb[k, 0] or x[j, 0] - r[j] > waabb[k, 3] or x[j, 1] + r[j] < waabb[k, 1]
-                        or x[j, 1] - r[j] > waabb[k, 4] or x[j, 2] + r[j] < waabb[k, 2]
-                        or x[j, 2] - r[j] > waabb[k, 5]):
+                if (X[j, 0] + r[j] < waabb[k, 0] or X[j, 0] - r[j] > waabb[k, 3] or X[j, 1] + r[j] < waabb[k, 1]
+                        or X[j, 1] - r[j] > waabb[k, 4] or X[j, 2] + r[j] < waabb[k, 2]
+                        or X[j, 2] - r[j] > waabb[k, 5]):
                     continue
                 for a in range(3):
-                    c[a] = x[j, a]
+                    c[a] = X[j, a]
                 sd = closest_on_polyhedron(c, wfv_start, wfv, wface_start[k], wface_start[k + 1], wvert, wfn, wfd,
                                            cpt)
                 if sd >= r[j]:
@@ -372,7 +519,7 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
                 depth = r[j] - sd
                 key = -1 - (j * nwall + k)
                 nc0 = nnew
-                nnew = _contact(k, j, True, key, depth, nx, ny, nz, cpt[0], cpt[1], cpt[2], x, v, w, m, fixed,
+                nnew = _contact(k, j, True, key, depth, nx, ny, nz, cpt[0], cpt[1], cpt[2], X, V, W, m, fixed,
                                 kin, wall_lawrow[k], dt, c_key[old], c_us[old], htab, hmask, nold, c_key[new],
                                 c_us[new], c_fn[new], c_ij[new], nnew, force, torque, res)
                 nwc += nnew - nc0
@@ -382,133 +529,183 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
             break
         c_n[new] = nnew
         cur[0] = new
+        # smooth joints
+        if njoint > 0:
+            stats[6] = _joints(dt, X, V, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide,
+                               j_us, j_sgn, force, res)
         # 3. bonds
         e_bond = 0.0
         nint = 0
+        # the reaction on sphere i is summed over its consecutive bonds (the list is sorted by i) before it is
+        # added to its row
+        ci = -1
+        g0 = g1 = g2 = h0 = h1 = h2 = 0.0
         for k in range(nbond):
             if not b_intact[k]:
                 continue
             i = bi[k]
             j = bj[k]
-            d0 = x[j, 0] - x[i, 0]
-            d1 = x[j, 1] - x[i, 1]
-            d2 = x[j, 2] - x[i, 2]
+            if i != ci:
+                if ci >= 0:
+                    force[ci, 0] -= g0
+                    force[ci, 1] -= g1
+                    force[ci, 2] -= g2
+                    torque[ci, 0] -= h0
+                    torque[ci, 1] -= h1
+                    torque[ci, 2] -= h2
+                ci = i
+                g0 = g1 = g2 = h0 = h1 = h2 = 0.0
+            d0 = X[j, 0] - X[i, 0]
+            d1 = X[j, 1] - X[i, 1]
+            d2 = X[j, 2] - X[i, 2]
             dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            nx = d0 / dl
-            ny = d1 / dl
-            nz = d2 / dl
-            # bond point: between the surfaces, in proportion to the radii
-            a0 = dl * r[i] / (r[i] + r[j])
-            ri0 = a0 * nx
-            ri1 = a0 * ny
-            ri2 = a0 * nz
-            rj0 = ri0 - d0
-            rj1 = ri1 - d1
-            rj2 = ri2 - d2
-            vr0 = v[j, 0] + w[j, 1] * rj2 - w[j, 2] * rj1 - v[i, 0] - (w[i, 1] * ri2 - w[i, 2] * ri1)
-            vr1 = v[j, 1] + w[j, 2] * rj0 - w[j, 0] * rj2 - v[i, 1] - (w[i, 2] * ri0 - w[i, 0] * ri2)
-            vr2 = v[j, 2] + w[j, 0] * rj1 - w[j, 1] * rj0 - v[i, 2] - (w[i, 0] * ri1 - w[i, 1] * ri0)
-            vn = vr0 * nx + vr1 * ny + vr2 * nz
+            inv = 1.0 / dl
+            nx = d0 * inv
+            ny = d1 * inv
+            nz = d2 * inv
+            # bond point: between the surfaces, in proportion to the radii (BB[k, 10] = r_i / (r_i + r_j))
+            # (arms: r_i = a0 n from i, r_j = aj n from j): relative velocity there
+            # v_j + w_j x r_j - v_i - w_i x r_i = dv + (aj w_j - a0 w_i) x n, whose normal part is dv.n
+            a0 = dl * BB[k, 10]
+            aj = a0 - dl
+            dv0 = V[j, 0] - V[i, 0]
+            dv1 = V[j, 1] - V[i, 1]
+            dv2 = V[j, 2] - V[i, 2]
+            vn = dv0 * nx + dv1 * ny + dv2 * nz
+            c0 = aj * W[j, 0] - a0 * W[i, 0]
+            c1 = aj * W[j, 1] - a0 * W[i, 1]
+            c2 = aj * W[j, 2] - a0 * W[i, 2]
+            vr0 = dv0 + c1 * nz - c2 * ny
+            vr1 = dv1 + c2 * nx - c0 * nz
+            vr2 = dv2 + c0 * ny - c1 * nx
             # shear displacement: onto the current tangent plane (length kept), then the increment
-            u0 = b_us[k, 0]
-            u1 = b_us[k, 1]
-            u2 = b_us[k, 2]
-            l0 = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-            un = u0 * nx + u1 * ny + u2 * nz
-            u0 -= un * nx
-            u1 -= un * ny
-            u2 -= un * nz
-            l1 = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-            if l1 > 0.0:
-                u0 *= l0 / l1
-                u1 *= l0 / l1
-                u2 *= l0 / l1
+            u0 = BB[k, 6]
+            u1 = BB[k, 7]
+            u2 = BB[k, 8]
+            uu = u0 * u0 + u1 * u1 + u2 * u2
+            if uu > 0.0:
+                un = u0 * nx + u1 * ny + u2 * nz
+                u0 -= un * nx
+                u1 -= un * ny
+                u2 -= un * nz
+                l1 = u0 * u0 + u1 * u1 + u2 * u2
+                if l1 > 0.0:
+                    sc = np.sqrt(uu / l1)
+                    u0 *= sc
+                    u1 *= sc
+                    u2 *= sc
             u0 += (vr0 - vn * nx) * dt
             u1 += (vr1 - vn * ny) * dt
             u2 += (vr2 - vn * nz) * dt
-            stretch = dl - b_len0[k]
-            fn = b_kn[k] * stretch  # tension > 0
-            fs = b_ks[k] * np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-            if fn > b_ft[k] or fs > b_fs[k]:
-                # breaks: its spring energy (last step's) leaves the system
+            stretch = dl - BB[k, 0]
+            fn = BB[k, 1] * stretch  # tension > 0
+            uu = u0 * u0 + u1 * u1 + u2 * u2
+            if fn > BB[k, 3] or BB[k, 2] * BB[k, 2] * uu > BB[k, 4] * BB[k, 4]:  # shear force ks |u| > fs
+                # breaks: its spring energy (last step's) leaves the system; the pair joins the pair list
                 b_intact[k] = False
                 b_break[k] = t
-                b_fn[k] = 0.0
-                res[1] += 0.5 * b_kn[k] * stretch * stretch + 0.5 * b_ks[k] * (u0 * u0 + u1 * u1 + u2 * u2)
-                b_us[k, 0] = 0.0
-                b_us[k, 1] = 0.0
-                b_us[k, 2] = 0.0
+                BB[k, 9] = 0.0
+                res[1] += 0.5 * BB[k, 1] * stretch * stretch + 0.5 * BB[k, 2] * uu
+                BB[k, 6] = 0.0
+                BB[k, 7] = 0.0
+                BB[k, 8] = 0.0
                 nbroken += 1
+                if (fixed[i] or kin[i]) and (fixed[j] or kin[j]):
+                    continue
+                if nl_n[0] < ncap:
+                    nl_pairs[nl_n[0], 0] = i
+                    nl_pairs[nl_n[0], 1] = j
+                    nl_n[0] += 1
+                else:
+                    nl_flag[0] = 1
                 continue
             nint += 1
-            b_us[k, 0] = u0
-            b_us[k, 1] = u1
-            b_us[k, 2] = u2
-            b_fn[k] = fn
-            e_bond += 0.5 * b_kn[k] * stretch * stretch + 0.5 * b_ks[k] * (u0 * u0 + u1 * u1 + u2 * u2)
+            BB[k, 6] = u0
+            BB[k, 7] = u1
+            BB[k, 8] = u2
+            BB[k, 9] = fn
+            e_bond += 0.5 * BB[k, 1] * stretch * stretch + 0.5 * BB[k, 2] * uu
             # force on j: -fn n - ks u (+ viscous damping on the normal and shear relative velocity)
             cdn = 0.0
-            if b_zeta[k] > 0.0:
+            if BB[k, 5] > 0.0:
                 si = fixed[i] or kin[i]
                 sj = fixed[j] or kin[j]
                 meff = m[j] if si and not sj else (m[i] if sj and not si else m[i] * m[j] / (m[i] + m[j]))
-                cdn = 2.0 * b_zeta[k] * np.sqrt(b_kn[k] * meff)
-                cds = 2.0 * b_zeta[k] * np.sqrt(b_ks[k] * meff)
+                cdn = 2.0 * BB[k, 5] * np.sqrt(BB[k, 1] * meff)
+                cds = 2.0 * BB[k, 5] * np.sqrt(BB[k, 2] * meff)
                 res[2] += (cdn * vn * vn + cds * ((vr0 - vn * nx) ** 2 + (vr1 - vn * ny) ** 2
                                                   + (vr2 - vn * nz) ** 2)) * dt
             else:
                 cds = 0.0
-            f0 = -(fn + cdn * vn) * nx - b_ks[k] * u0 - cds * (vr0 - vn * nx)
-            f1 = -(fn + cdn * vn) * ny - b_ks[k] * u1 - cds * (vr1 - vn * ny)
-            f2 = -(fn + cdn * vn) * nz - b_ks[k] * u2 - cds * (vr2 - vn * nz)
+            f0 = -(fn + cdn * vn) * nx - BB[k, 2] * u0 - cds * (vr0 - vn * nx)
+            f1 = -(fn + cdn * vn) * ny - BB[k, 2] * u1 - cds * (vr1 - vn * ny)
+            f2 = -(fn + cdn * vn) * nz - BB[k, 2] * u2 - cds * (vr2 - vn * nz)
+            # torques: r_j x f = aj (n x f) on j, r_i x f = a0 (n x f) against i
+            q0 = ny * f2 - nz * f1
+            q1 = nz * f0 - nx * f2
+            q2 = nx * f1 - ny * f0
             force[j, 0] += f0
             force[j, 1] += f1
             force[j, 2] += f2
-            torque[j, 0] += rj1 * f2 - rj2 * f1
-            torque[j, 1] += rj2 * f0 - rj0 * f2
-            torque[j, 2] += rj0 * f1 - rj1 * f0
-            force[i, 0] -= f0
-            force[i, 1] -= f1
-            force[i, 2] -= f2
-            torque[i, 0] -= ri1 * f2 - ri2 * f1
-            torque[i, 1] -= ri2 * f0 - ri0 * f2
-            torque[i, 2] -= ri0 * f1 - ri1 * f0
-        # 4. central difference
+            torque[j, 0] += aj * q0
+            torque[j, 1] += aj * q1
+            torque[j, 2] += aj * q2
+            g0 += f0
+            g1 += f1
+            g2 += f2
+            h0 += a0 * q0
+            h1 += a0 * q1
+            h2 += a0 * q2
+        if ci >= 0:
+            force[ci, 0] -= g0
+            force[ci, 1] -= g1
+            force[ci, 2] -= g2
+            torque[ci, 0] -= h0
+            torque[ci, 1] -= h1
+            torque[ci, 2] -= h2
+        # 4. central difference (and the largest move since the pair list was built)
         dtavg = 0.5 * (dt + dt_prev)
         ke = 0.0
         pe = 0.0
         d_loc = 0.0
         blown = False
+        moved = 0.0
         for i in range(n):
             if fixed[i]:
                 continue
             if kin[i]:
-                acc[0] -= dt * (force[i, 0] * v[i, 0] + force[i, 1] * v[i, 1] + force[i, 2] * v[i, 2]
-                                + torque[i, 0] * w[i, 0] + torque[i, 1] * w[i, 1] + torque[i, 2] * w[i, 2])
+                acc[0] -= dt * (force[i, 0] * V[i, 0] + force[i, 1] * V[i, 1] + force[i, 2] * V[i, 2]
+                                + torque[i, 0] * W[i, 0] + torque[i, 1] * W[i, 1] + torque[i, 2] * W[i, 2])
                 for a in range(3):
-                    x[i, a] += dt * v[i, a]
-                continue
-            for a in range(3):
-                f = force[i, a] + m[i] * gravity[a] + bforce[i, a]
-                tq = torque[i, a]
-                if local_damp > 0.0:
-                    if v[i, a] != 0.0:
-                        fd = local_damp * abs(f) * (1.0 if v[i, a] > 0 else -1.0)
-                        f -= fd
-                        d_loc += fd * v[i, a] * dtavg
-                    if w[i, a] != 0.0:
-                        td = local_damp * abs(tq) * (1.0 if w[i, a] > 0 else -1.0)
-                        tq -= td
-                        d_loc += td * w[i, a] * dtavg
-                vn_ = v[i, a] + dtavg * f / m[i]
-                wn_ = w[i, a] + dtavg * tq / inertia[i]
-                ke += 0.5 * m[i] * v[i, a] * vn_ + 0.5 * inertia[i] * w[i, a] * wn_
-                pe -= (m[i] * gravity[a] + bforce[i, a]) * x[i, a]
-                v[i, a] = vn_
-                w[i, a] = wn_
-                x[i, a] += dt * vn_
-                if not np.isfinite(x[i, a]) or not np.isfinite(vn_) or not np.isfinite(wn_):
-                    blown = True
+                    X[i, a] += dt * V[i, a]
+            else:
+                for a in range(3):
+                    f = force[i, a] + m[i] * gravity[a] + bforce[i, a]
+                    tq = torque[i, a]
+                    if local_damp > 0.0:
+                        if V[i, a] != 0.0:
+                            fd = local_damp * abs(f) * (1.0 if V[i, a] > 0 else -1.0)
+                            f -= fd
+                            d_loc += fd * V[i, a] * dtavg
+                        if W[i, a] != 0.0:
+                            td = local_damp * abs(tq) * (1.0 if W[i, a] > 0 else -1.0)
+                            tq -= td
+                            d_loc += td * W[i, a] * dtavg
+                    vn_ = V[i, a] + dtavg * f / m[i]
+                    wn_ = W[i, a] + dtavg * tq / inertia[i]
+                    ke += 0.5 * m[i] * V[i, a] * vn_ + 0.5 * inertia[i] * W[i, a] * wn_
+                    pe -= (m[i] * gravity[a] + bforce[i, a]) * X[i, a]
+                    V[i, a] = vn_
+                    W[i, a] = wn_
+                    X[i, a] += dt * vn_
+                    if not np.isfinite(X[i, a]) or not np.isfinite(vn_) or not np.isfinite(wn_):
+                        blown = True
+            e0 = X[i, 0] - x_ref[i, 0]
+            e1 = X[i, 1] - x_ref[i, 1]
+            e2 = X[i, 2] - x_ref[i, 2]
+            moved = max(moved, e0 * e0 + e1 * e1 + e2 * e2)
+        if not moved <= half2:
+            nl_flag[0] = 1
         dt_prev = dt
         t += dt
         energy[0] = ke
@@ -525,4 +722,9 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
             status = BLOWUP
             break
     stats[3] = nbroken
+    for i in range(n):
+        for a in range(3):
+            x[i, a] = X[i, a]
+            v[i, a] = V[i, a]
+            w[i, a] = W[i, a]
     return status, done

@@ -126,7 +126,7 @@ def _run_spheres(scene, out, args, say, t0):
     colour = _model_colour(scene.spheres["model"], ss.n)
     if say:
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
-            f"{len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
+            f"{ss.n_joints} smooth joints, {len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s)")
     tmp = out.with_name(f".{out.name}.part{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)

@@ -93,8 +93,15 @@ class DDAScene:
         sp = self.spheres
         ss = load_model(sp["model"], density=sp["density"], bonds=sp["bonds"])
         ss.fixed |= self.fixed_spheres(ss.centers)
+        moving = not all(getattr(b, "fixed", False) for b in self.blocks)
+        if sp.get("smooth_joints", True) and hasattr(sp["model"], "joint_pairs"):
+            # pairs cut by a zero-thickness joint slide on the joint plane (smooth joints)
+            cut, _, normal = sp["model"].joint_pairs()
+            if len(cut):
+                pairs = np.asarray(sp["model"].bonds, np.int64).reshape(-1, 2)[cut]
+                ss.add_joints(pairs, normal, sp.get("joint_friction", self.law.friction_deg))
         walls = self.blocks
-        if not all(getattr(b, "fixed", False) for b in self.blocks):
+        if moving:
             walls = self.block_system()  # moving blocks: one coupled loop with the spheres
         sim = SphereSimulation(ss, self.law, walls=walls, gravity=self.gravity, dt=self.dt, safety=self.safety,
                                local_damping=self.local_damping, pair_laws=self.pair_laws)

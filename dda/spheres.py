@@ -36,6 +36,18 @@ area A = pi (radius_factor min(r_i, r_j))^2 and length L0 = initial centre dista
 shear_ratio kn) or directly as ``kn`` / ``ks`` [N/m]; the tensile and shear strengths [Pa] times A are the
 forces at which the bond breaks (for good). Bond states are reported per record (``SphereResults.bonds``)
 and the time each bond broke in ``bond_break_time`` (-1: intact).
+
+Smooth joints (``SphereSet.add_joints(pairs, normals, friction_deg)``, the pairs a joint cuts; a DDA scene adds
+the model's joint pairs with [spheres] smooth_joints = true): such a pair does not touch along its centre
+line but across the joint plane, as YADE's JCFpm smoothJoint: normal overlap D = initD - |(x_j - x_i).n|
+measured along the joint's unit normal n from the gap initD the pair had when its contact formed (at the
+start for pairs within (1 + ``joint_touch``) (r_i + r_j), later when the spheres overlap), force kn D along n
+while D >= 0, a shear spring ks on the centre velocity difference in the joint plane with Coulomb friction
+tan(joint friction), no torque; the contact is lost when D < 0 or once the pair has slid 2 min(r_i, r_j)
+(``sim.joint_on``, ``joint_slide``), with fixed walls and with moving blocks alike.
+
+Contacts are searched in a pair list (dda/_spheres.py) rebuilt when a sphere has moved half its margin
+``skin`` (0.2 r_min): ``sim.stats[7]`` counts the builds.
 """
 from __future__ import annotations
 
@@ -104,10 +116,19 @@ class SphereSet:
         self.bond_ft = np.zeros(0)
         self.bond_fs = np.zeros(0)
         self.bond_zeta = np.zeros(0)
+        self.joint_i = np.zeros(0, np.int64)
+        self.joint_j = np.zeros(0, np.int64)
+        self.joint_normal = np.zeros((0, 3))
+        self.joint_tanphi = np.zeros(0)
+        self.joint_touch = 0.05
 
     @property
     def n(self):
         return len(self.radii)
+
+    @property
+    def n_joints(self):
+        return len(self.joint_i)
 
     @property
     def n_bonds(self):
@@ -138,7 +159,42 @@ class SphereSet:
         keys = self.bond_i * self.n + self.bond_j
         if len(np.unique(keys)) != len(keys):
             raise ValueError("a sphere pair is bonded twice")
+        if self.n_joints and np.isin(keys, self.joint_i * self.n + self.joint_j).any():
+            raise ValueError("a sphere pair is both bonded and a smooth joint")
         return np.arange(first, self.n_bonds)
+
+    def add_joints(self, pairs, normals, friction_deg):
+        """Smooth joints on the sphere pairs (k, 2) (the pairs a joint cuts): their contact acts along the joint's
+        unit normal (k, 3) (signed from the pair's lower index to the higher; given for a pair (j, i) with
+        j > i it is flipped) instead of the centre line, with Coulomb friction `friction_deg` (a number or one
+        per pair), as YADE's JCFpm smoothJoint (dda/_spheres.py ``_joints``). Pairs within (1 + joint_touch)
+        (r_i + r_j) at the start of a run are in contact there, at the gap they have. Returns the indices."""
+        p = np.asarray(pairs, np.int64).reshape(-1, 2)
+        nrm = np.asarray(normals, float).reshape(-1, 3)
+        if len(nrm) != len(p):
+            raise ValueError("one joint normal per pair")
+        if len(p) and (p.min() < 0 or p.max() >= self.n or np.any(p[:, 0] == p[:, 1])):
+            raise ValueError("joint pairs must name two different spheres of the set")
+        ln = np.linalg.norm(nrm, axis=1)
+        if not np.all(np.isfinite(ln) & (ln > 0)):
+            raise ValueError("joint normals must be finite and non-zero")
+        tanphi = np.tan(np.radians(np.broadcast_to(np.asarray(friction_deg, float), (len(p),))))
+        if not np.all((tanphi >= 0) & np.isfinite(tanphi)):
+            raise ValueError(f"joint friction must be in [0, 90) degrees (got {friction_deg!r})")
+        sign = np.where(p[:, 0] < p[:, 1], 1.0, -1.0)
+        i = np.minimum(p[:, 0], p[:, 1])
+        j = np.maximum(p[:, 0], p[:, 1])
+        keys = np.r_[self.joint_i * self.n + self.joint_j, i * self.n + j]
+        if len(np.unique(keys)) != len(keys):
+            raise ValueError("a sphere pair is a smooth joint twice")
+        if self.n_bonds and np.isin(i * self.n + j, self.bond_i * self.n + self.bond_j).any():
+            raise ValueError("a sphere pair is both bonded and a smooth joint")
+        first = self.n_joints
+        self.joint_i = np.r_[self.joint_i, i]
+        self.joint_j = np.r_[self.joint_j, j]
+        self.joint_normal = np.r_[self.joint_normal, nrm / ln[:, None] * sign[:, None]]
+        self.joint_tanphi = np.r_[self.joint_tanphi, tanphi]
+        return np.arange(first, self.n_joints)
 
 
 def load_model(model, density=2600.0, bonds: BondLaw | None = None) -> SphereSet:
@@ -276,15 +332,48 @@ class SphereSimulation:
         self.fixed = ss.fixed.copy()
         self.kin = ss.prescribed & ~ss.fixed
         self.bforce = np.ascontiguousarray(ss.body_force, float)
-        self.bond_us = np.zeros((ss.n_bonds, 3))
+        # bond constants and state in one row per bond (dda/_spheres.py): bond_us and bond_fn are views of it
+        self.bond_rows = np.zeros((ss.n_bonds, 12))
+        for col, arr in enumerate((ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta)):
+            self.bond_rows[:, col] = arr
+        self.bond_rows[:, 10] = ss.radii[ss.bond_i] / (ss.radii[ss.bond_i] + ss.radii[ss.bond_j])
+        self.bond_us = self.bond_rows[:, 6:9]
         self.bond_intact = np.ones(ss.n_bonds, bool)
-        self.bond_fn = np.zeros(ss.n_bonds)
+        self.bond_fn = self.bond_rows[:, 9]
+        self.sphere_rows = np.zeros((n, 16))
         self.bond_break_time = np.full(ss.n_bonds, -1.0)
         self.bkey_tab, self.bkey_slot = _sp.build_bond_hash(ss.bond_i, ss.bond_j, n)
+        # bonds per sphere (CSR on the lower index): the pair-list build skips bonded pairs with it
+        lo, hi = np.minimum(ss.bond_i, ss.bond_j), np.maximum(ss.bond_i, ss.bond_j)
+        order = np.lexsort((hi, lo))
+        self.bond_start = np.searchsorted(lo[order], np.arange(n + 1)).astype(np.int64)
+        self.bond_nbr = np.ascontiguousarray(hi[order], np.int64)
+        self.bond_idx = np.ascontiguousarray(order, np.int64)
+        # smooth joints: in contact at the start when touching (reference gap: the projected distance now)
+        nj = ss.n_joints
+        self.joint_i = ss.joint_i.copy()
+        self.joint_j = ss.joint_j.copy()
+        self.joint_normal = np.ascontiguousarray(ss.joint_normal, float).reshape(-1, 3)
+        self.joint_tanphi = ss.joint_tanphi.astype(float)
+        d = self.x[self.joint_j] - self.x[self.joint_i]
+        dn = np.einsum("ij,ij->i", d, self.joint_normal)
+        self.joint_on = np.linalg.norm(d, axis=1) <= (1.0 + ss.joint_touch) * (ss.radii[self.joint_i]
+                                                                                + ss.radii[self.joint_j])
+        self.joint_init = np.abs(dn)
+        self.joint_slide = np.zeros(nj)
+        self.joint_us = np.zeros((nj, 3))
+        self.joint_sign = np.where(dn >= 0, 1.0, -1.0)
+        self.jkey_tab, self.jkey_slot = _sp.build_bond_hash(self.joint_i, self.joint_j, n)
+        # Verlet pair list of the sphere-sphere contacts (margin skin; rebuilt when a sphere moved skin / 2)
+        self.skin = 0.2 * float(ss.radii.min())
+        self.nl_pairs = np.zeros((max(64, 2 * n), 2), np.int64)
+        self.nl_n = np.zeros(1, np.int64)
+        self.nl_flag = np.ones(1, np.int64)
+        self.x_ref = self.x.copy()
         self._alloc(max(64, 8 * n))
         self.energy = np.zeros(6)
         self.acc = np.zeros(1)
-        self.stats = np.zeros(5)
+        self.stats = np.zeros(8)
 
     def _init_coupled(self, system, wall_law, block_law, pair_laws, dt, safety):
         """Spheres with moving blocks: a block Simulation stepped inside the coupled loop (dda/_coupled.py)."""
@@ -348,6 +437,8 @@ class SphereSimulation:
                 self.lawrow, self.wall_lawrow,
                 ss.bond_i, ss.bond_j, ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta,
                 self.bond_us, self.bond_intact, self.bond_fn, self.bond_break_time, self.bkey_tab, self.bkey_slot,
+                self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi, self.joint_on, self.joint_init,
+                self.joint_slide, self.joint_us, self.joint_sign, self.jkey_tab, self.jkey_slot,
                 self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab, self.sforce,
                 self.storque, self.acc, self.energy, self.sres, self.stats,
                 A.face_vert_start, A.face_verts, self.bstamp, self.btag,
@@ -432,9 +523,12 @@ class SphereSimulation:
                 nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.time,
                 self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
                 self.lawrow, self.wall_lawrow,
-                ss.bond_i, ss.bond_j, ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta,
-                self.bond_us, self.bond_intact, self.bond_fn, self.bond_break_time, self.bkey_tab, self.bkey_slot,
+                ss.bond_i, ss.bond_j, self.bond_rows, self.bond_intact, self.bond_break_time, self.bond_start,
+                self.bond_nbr, self.bond_idx, self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi,
+                self.joint_on, self.joint_init, self.joint_slide, self.joint_us, self.joint_sign, self.jkey_tab,
+                self.jkey_slot,
                 self.wvert, self.wfn, self.wfd, self.wfv_start, self.wfv, self.wface_start, self.waabb,
+                self.nl_pairs, self.nl_n, self.nl_flag, self.x_ref, self.skin, self.sphere_rows,
                 self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab, self.energy, self.acc,
                 self.stats)
             if done:
@@ -448,6 +542,10 @@ class SphereSimulation:
                 self._alloc(max(2 * cap, int(1.5 * self.stats[4])))
                 self.cur[:], self.c_n[:] = old[0], old[1]
                 self.c_key[:, :cap], self.c_us[:, :cap], self.c_fn[:, :cap], self.c_ij[:, :cap] = old[2:]
+                continue
+            if status == _sp.NEED_PAIRS:
+                self.nl_pairs = np.zeros((int(1.5 * self.stats[5]) + 64, 2), np.int64)
+                self.nl_flag[0] = 1
                 continue
             return status
 

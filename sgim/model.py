@@ -87,6 +87,46 @@ class SphereModel:
             "discontinuities": int(len(self.disc_radius) + len(self.surfaces.get("surf_thickness", ()))),
         }
 
+    def joint_pairs(self):
+        """(pair index into ``bonds``, discontinuity index, unit normal (k, 3) pointing from sphere i to sphere j)
+        of every touching pair cut by a zero-thickness discontinuity (a joint disc or a triangulated joint
+        surface): the pairs that slide on the joint plane (smooth joints). Pairs cut by a fault (thickness > 0)
+        are not listed."""
+        bonds = np.asarray(self.bonds, np.int64).reshape(-1, 2)
+        cut_by = np.asarray(self.cut_by)
+        nd = len(self.disc_radius)
+        surf = self.surfaces or {}
+        s_index = np.asarray(surf.get("surf_index", np.zeros(0, int)))
+        s_thick = np.asarray(surf.get("surf_thickness", np.zeros(0)))
+        thickness = np.full(nd + len(s_index), np.inf)
+        thickness[:nd] = self.disc_thickness
+        for k, d in enumerate(s_index):
+            thickness[int(d)] = s_thick[k]
+        cut = np.flatnonzero(~np.asarray(self.bonded, bool) & (cut_by >= 0))
+        d = cut_by[cut]
+        keep = thickness[d] == 0.0
+        cut, d = cut[keep], d[keep]
+        normal = np.zeros((len(cut), 3))
+        on_disc = d < nd
+        normal[on_disc] = np.asarray(self.disc_normal)[d[on_disc]]
+        c = np.asarray(self.centers)
+        if np.any(~on_disc):
+            from .meshquery import TriMesh
+
+            vs, fs = surf["surf_vertex_start"], surf["surf_face_start"]
+            for k, dk in enumerate(s_index):
+                sel = np.flatnonzero(d == dk)
+                if not len(sel):
+                    continue
+                mesh = TriMesh(surf["surf_vertices"][vs[k]:vs[k + 1]], surf["surf_faces"][fs[k]:fs[k + 1]] - vs[k])
+                mid = 0.5 * (c[bonds[cut[sel], 0]] + c[bonds[cut[sel], 1]])
+                t = mesh.vertices[mesh.faces[mesh.closest(mid)[2]]]
+                nrm = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+                normal[sel] = nrm / np.linalg.norm(nrm, axis=1)[:, None]
+        dx = c[bonds[cut, 1]] - c[bonds[cut, 0]]
+        normal *= np.where(np.einsum("ij,ij->i", normal, dx) < 0, -1.0, 1.0)[:, None]
+        return cut, d, normal
+
     # -- npz ---------------------------------------------------------------
     def save(self, path):
         data = {k: getattr(self, k) for k in self.ARRAYS}
