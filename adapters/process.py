@@ -14,7 +14,6 @@ import signal
 import subprocess
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 ENGINES = {"yade": "yade", "liggghts": "liggghts", "mpirun": "mpirun"}
 # lines that carry an engine's own error message: LIGGGHTS/LAMMPS "ERROR: ...", a Python exception line

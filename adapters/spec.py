@@ -113,7 +113,7 @@ class SphereRun:
     def in_house(self):
         """(SphereSet, SphereSimulation) of the in-house engine for this run (dda.spheres)."""
         from dda.simulation import ContactLaw
-        from dda.spheres import SphereSet, SphereSimulation
+        from dda.spheres import SphereSimulation
 
         ss = _sphere_set(self)
         law = ContactLaw(kn=self.kn, ks=self.ks, friction_deg=self.friction_deg, damping=self.damping)

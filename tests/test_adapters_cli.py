@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -18,20 +17,13 @@ import numpy as np
 import pytest
 
 from adapters.result import RunResult
+from engine_runs import require_engine
 from sgim.build import build_model
 from sgim.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 HANG = ROOT / "cases" / "crossval" / "hang_joint.toml"
 MODEL = ROOT / "cases" / "crossval" / "hang_joint_model.toml"
-CI = os.environ.get("CI", "").lower() == "true"
-
-
-def need(engine):
-    if shutil.which(engine) is None:
-        if CI:
-            pytest.fail(f"{engine} is not installed (CI=true: the README set-up installs it)")
-        pytest.skip(f"{engine} is not installed")
 
 
 def cli(*args, env=None):
@@ -69,7 +61,7 @@ def test_export_pfc_text_lists_every_ball_and_contact(tmp_path, model):
 
 @pytest.mark.parametrize("engine", ["yade", "liggghts"])
 def test_export_and_run_each_engine(tmp_path, engine):
-    need(engine)
+    require_engine(engine)
     deck = tmp_path / engine
     r = cli("export", HANG, "--to", engine, "-o", deck, "--duration", "0.01", "--quiet")
     assert r.returncode == 0, r.stderr
@@ -97,7 +89,7 @@ def test_export_and_run_each_engine(tmp_path, engine):
 
 
 def test_run_in_house_from_a_deck(tmp_path):
-    need("liggghts")
+    require_engine("liggghts")
     deck = tmp_path / "d"
     assert cli("export", HANG, "--to", "liggghts", "-o", deck, "--duration", "0.005", "--quiet").returncode == 0
     r = cli("run", deck, "--in-house", "--json", "--quiet")
@@ -128,7 +120,7 @@ def test_bad_input_one_line_and_nothing_left(tmp_path):
 
 @pytest.mark.parametrize("engine", ["yade", "liggghts"])
 def test_engine_missing_from_path(tmp_path, engine):
-    need(engine)
+    require_engine(engine)
     deck = tmp_path / "d"
     assert cli("export", HANG, "--to", engine, "-o", deck, "--duration", "0.005", "--quiet").returncode == 0
     env = dict(os.environ, PATH=str(Path(sys.executable).parent))  # python, but no engines
@@ -140,7 +132,7 @@ def test_engine_missing_from_path(tmp_path, engine):
 
 @pytest.mark.parametrize("engine", ["yade", "liggghts"])
 def test_time_limit_keeps_partial_results(tmp_path, engine):
-    need(engine)
+    require_engine(engine)
     deck = tmp_path / "d"
     assert cli("export", HANG, "--to", engine, "-o", deck, "--duration", "20", "--quiet").returncode == 0
     r = cli("run", deck, "--timeout", "6", "--quiet")
@@ -151,7 +143,7 @@ def test_time_limit_keeps_partial_results(tmp_path, engine):
 
 
 def test_engine_error_mid_run_is_surfaced(tmp_path):
-    need("liggghts")
+    require_engine("liggghts")
     deck = tmp_path / "d"
     assert cli("export", HANG, "--to", "liggghts", "-o", deck, "--duration", "0.005", "--quiet").returncode == 0
     with open(deck / "in", "a") as fh:

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
 
 import numpy as np
 import pytest
@@ -14,36 +12,11 @@ import pytest
 from adapters import liggghts
 from adapters.process import EngineError
 from adapters.result import RunResult
-from adapters.spec import SphereRun, from_model
-
-G = 9.81
-
-if shutil.which("liggghts") is None:  # a missing engine fails the suite on CI (never skipped there)
-    if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
-        raise RuntimeError("liggghts not found on PATH (install the Debian package 'liggghts', see README)")
-    pytest.skip("liggghts not installed", allow_module_level=True)
+from adapters.spec import from_model
+from engine_runs import G, hand_run, require_engine
 
 
-def hand_run(centers, radii, fixed=(), bonds=(), kn=1e6, ft=math.inf, dt=1e-5, duration=0.01, record_every=None,
-             colour=None, density=2000.0, gravity=(0.0, 0.0, -G), name="hand", **extra):
-    """A SphereRun written out by hand (no sgim model): bonds (i, j) with stiffness kn and strength ft."""
-    c = np.asarray(centers, float).reshape(-1, 3)
-    n = len(c)
-    r = np.broadcast_to(np.asarray(radii, float), (n,)).copy()
-    fx = np.zeros(n, bool)
-    fx[list(fixed)] = True
-    b = np.asarray(bonds, np.int64).reshape(-1, 2)
-    bi, bj = b.min(1), b.max(1)
-    m = len(b)
-    return SphereRun(
-        name=name, centers=c, radii=r, colour=np.zeros(n, np.int8) if colour is None else np.asarray(colour, np.int8),
-        fixed=fx, density=density, bond_i=bi, bond_j=bj, bond_len0=np.linalg.norm(c[bj] - c[bi], axis=1),
-        bond_kn=np.full(m, float(kn)), bond_ks=np.full(m, 0.4 * kn), bond_ft=np.broadcast_to(ft, (m,)).astype(float),
-        bond_fs=np.full(m, math.inf), joint_i=np.zeros(0, np.int64), joint_j=np.zeros(0, np.int64),
-        joint_disc=np.zeros(0, np.int32), joint_normal=np.zeros((0, 3)), cut_i=np.zeros(0, np.int64),
-        cut_j=np.zeros(0, np.int64), kn=1e6, ks=5e5, friction_deg=30.0, damping=0.0, joint_friction_deg=30.0,
-        smooth_joints=True, gravity=np.asarray(gravity, float), dt=dt, duration=duration,
-        record_every=record_every or duration / 10, local_damping=0.0, extra=dict(extra))
+require_engine("liggghts", module=True)
 
 
 def deck(run, path, variant="bonds"):
@@ -136,7 +109,7 @@ def test_free_fall_matches_half_g_t2(tmp_path):
     z = res.pos[:, 0, 2]
     assert np.allclose(z, -0.5 * G * t ** 2, rtol=1e-9, atol=1e-12)
     assert np.allclose(res.final_vel[0], [0, 0, -G * 0.2], rtol=1e-9)
-    m = 2000.0 * 4 / 3 * math.pi * 0.05 ** 3
+    m = 2600.0 * 4 / 3 * math.pi * 0.05 ** 3  # hand_run's density
     assert np.allclose(res.series["kinetic"], 0.5 * m * (G * t) ** 2, rtol=1e-9)
     back = RunResult.load(tmp_path / "out")
     assert back.status == "complete" and np.array_equal(back.final_pos, res.final_pos)

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
 
 import numpy as np
 import pytest
@@ -16,36 +14,11 @@ import pytest
 from adapters import yade
 from adapters.process import EngineError
 from adapters.result import RunResult
-from adapters.spec import SphereRun, from_model
-
-G = 9.81
-
-if shutil.which("yade") is None:  # a missing engine fails the suite on CI (never skipped there)
-    if os.environ.get("CI", "").lower() in ("1", "true", "yes"):
-        raise RuntimeError("yade not found on PATH (install the Debian package 'yade', see README)")
-    pytest.skip("yade not installed", allow_module_level=True)
+from adapters.spec import from_model
+from engine_runs import G, hand_run, require_engine
 
 
-def hand_run(centers, radii, fixed=(), bonds=(), kn=1e6, ft=math.inf, dt=1e-5, duration=0.01, record_every=None,
-             density=2600.0, gravity=(0.0, 0.0, -G), local_damping=0.0):
-    """A SphereRun written out by hand (no sgim model): bonds (i, j) with stiffness kn and strength ft."""
-    c = np.asarray(centers, float).reshape(-1, 3)
-    n = len(c)
-    r = np.broadcast_to(np.asarray(radii, float), (n,)).copy()
-    fx = np.zeros(n, bool)
-    fx[list(fixed)] = True
-    b = np.asarray(bonds, np.int64).reshape(-1, 2)
-    bi, bj = b.min(1), b.max(1)
-    m = len(b)
-    return SphereRun(
-        name="hand", centers=c, radii=r, colour=np.zeros(n, np.int8), fixed=fx, density=density, bond_i=bi,
-        bond_j=bj, bond_len0=np.linalg.norm(c[bj] - c[bi], axis=1), bond_kn=np.full(m, kn), bond_ks=np.full(m, kn / 2),
-        bond_ft=np.broadcast_to(np.asarray(ft, float), (m,)).copy(), bond_fs=np.full(m, math.inf),
-        joint_i=np.zeros(0, np.int64), joint_j=np.zeros(0, np.int64), joint_disc=np.zeros(0, np.int32),
-        joint_normal=np.zeros((0, 3)), cut_i=np.zeros(0, np.int64), cut_j=np.zeros(0, np.int64), kn=kn, ks=kn / 2,
-        friction_deg=30.0, damping=0.0, joint_friction_deg=30.0, smooth_joints=True,
-        gravity=np.asarray(gravity, float), dt=dt, duration=duration, record_every=record_every or duration / 10,
-        local_damping=local_damping)
+require_engine("yade", module=True)
 
 
 def deck(run, tmp_path, name="deck", **kw):
