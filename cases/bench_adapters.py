@@ -2,7 +2,7 @@
 
     .venv/bin/python -m cases.bench_adapters [--n 100000] [--packing fcc,random] [--steps 200] [--repeats 3]
                                              [--yade-n 10000] [--yade-steps 20] [--skip ENGINES] [--quick]
-                                             [--json OUT]
+                                             [--split] [--json OUT]
 
 Each deck (--packing, default both): an sgim packing (radius 1 cm; ``fcc``: FCC lattice, 12 bonds per sphere;
 ``random``: sgim's random packing, about 6) of about --n spheres in a cube, every touching pair bonded
@@ -11,7 +11,10 @@ with friction 30 deg, dt = half the in-house critical step (adapters.spec.from_m
 so the engines step the same spheres, bonds, contact law and time step:
 
   dda       adapters.inhouse.run_inhouse: stepping wall and CPU time (the set-up excluded; the first pair-list
-            build and the records included);
+            build and the records included), with the full bond law (row "dda (normal+shear bonds)": normal
+            and shear springs and torques);
+  dda-central  the same run with bond_ks = 0: central-spring bonds, the physics of LIGGGHTS' harmonic bonds
+            (row "dda (central bonds, as LIGGGHTS)", the like-for-like comparison);
   liggghts  adapters.deck.export(--to liggghts) + adapters.deck.run, 1 rank: wall = the sum of LIGGGHTS' own
             "Loop time" lines (stepping only; start-up, reading the data file and dumps excluded); CPU = the
             CPU time of the process minus that of the same deck 5 steps long (start-up and reading excluded);
@@ -21,14 +24,18 @@ so the engines step the same spheres, bonds, contact law and time step:
 The in-house engine and LIGGGHTS alternate, repeat by repeat (medians of --repeats), so that both see the same
 machine load; the CPU-time columns are the steadier measure on a shared machine. Particle-steps per second =
 spheres x steps / seconds; ratio = engine / LIGGGHTS. Each engine runs one process on one core. The bonds
-differ in cost: in-house bonds carry a normal and a shear spring and torques, LIGGGHTS' harmonic bonds are
-central springs (adapters/liggghts.py). --quick: 10^4 spheres, 50 steps, one repeat, YADE at 2000 spheres.
+differ in cost: full in-house bonds carry a normal and a shear spring and torques, LIGGGHTS' harmonic bonds
+are central springs (adapters/liggghts.py), as the in-house central bonds (dda.spheres: ks = 0).
+--split: for each in-house law, the kernel's time per step split into bonds, sphere contacts and the rest
+(pair list, force reset, integration), from extra runs with the bond loops (and then the contact pairs)
+left out. --quick: 10^4 spheres, 50 steps, one repeat, YADE at 2000 spheres.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import os
 import re
 import shutil
 import statistics
@@ -67,6 +74,44 @@ def fcc_run(n_target, steps, packing="fcc"):
     run.duration = steps * run.dt
     run.record_every = run.duration
     return run
+
+
+LABELS = {"dda": "dda (normal+shear bonds)", "dda-central": "dda (central bonds, as LIGGGHTS)",
+          "liggghts": "liggghts (harmonic bonds)", "yade": "yade (JCFpm)"}
+
+
+def central_run(run):
+    """The same run with central-spring bonds (bond_ks = 0, as LIGGGHTS' harmonic bonds), same time step."""
+    from dataclasses import replace
+
+    return replace(run, bond_ks=np.zeros_like(np.asarray(run.bond_ks, float)))
+
+
+def inhouse_split(run, steps):
+    """Kernel time per step [s] of the in-house run: total, bonds, sphere contacts, rest (pair list, force
+    reset, integration): `steps` steps timed on a fresh simulation (after its first step) with everything, without
+    the bond loops, and without the bond loops and the listed contact pairs; medians of three rounds."""
+    from adapters.inhouse import reordered, spatial_order
+
+    local, _ = reordered(run, spatial_order(run.centers, run.radii))
+    none = np.zeros(0, np.int64)
+    t = {"total": [], "no_bonds": [], "no_bonds_no_contacts": []}
+    for _ in range(3):
+        for mode in t:
+            _, sim = local.in_house()
+            sim.run(sim.dt)
+            npair = int(sim.nl_n[0])
+            if mode != "total":
+                sim.bond_full, sim.cbond_idx = none, none
+            if mode == "no_bonds_no_contacts":
+                sim.nl_n[0] = 0
+            t0 = time.perf_counter()
+            sim._chunk(steps)
+            t[mode].append((time.perf_counter() - t0) / steps)
+    m = {k: statistics.median(v) for k, v in t.items()}
+    return {"total": m["total"], "bonds": m["total"] - m["no_bonds"],
+            "contacts": m["no_bonds"] - m["no_bonds_no_contacts"], "rest": m["no_bonds_no_contacts"],
+            "pairs": npair}
 
 
 def inhouse_once(run):
@@ -150,20 +195,28 @@ def bench_deck(packing, args, skip, tmp):
           f"dt = {run.dt:.3g} s, {run.steps} steps (built in {time.perf_counter() - t:.1f} s)", flush=True)
     rows = []
     # in-house and LIGGGHTS alternate, repeat by repeat, so that both see the same machine load
-    engines = [e for e in ("dda", "liggghts") if e not in skip]
+    engines = [e for e in ("dda", "dda-central", "liggghts") if e not in skip]
+    crun = central_run(run)
     decks = liggghts_decks(run, tmp) if "liggghts" in engines else None
     walls = {e: [] for e in engines}
     cpus = {e: [] for e in engines}
     info = {}
     for k in range(args.repeats):
         for e in engines:
-            if e == "dda":
-                w, c, info[e] = inhouse_once(run)
+            if e in ("dda", "dda-central"):
+                w, c, info[e] = inhouse_once(run if e == "dda" else crun)
             else:
                 w, c, info[e] = liggghts_once(run, decks, tmp / f"liggghts_{packing}_out{k}")
             walls[e].append(w)
             cpus[e].append(c)
             print(f"  {e} repeat {k + 1}: wall {w:.3f} s, cpu {c:.3f} s", flush=True)
+    if args.split:
+        for e in engines:
+            if e in ("dda", "dda-central"):
+                info[e]["split_s_per_step"] = sp = inhouse_split(run if e == "dda" else crun, args.steps)
+                print(f"  {LABELS[e]}: per step {1e3 * sp['total']:.2f} ms = bonds {1e3 * sp['bonds']:.2f} + "
+                      f"contacts {1e3 * sp['contacts']:.2f} ({sp['pairs']} listed pairs) + pair list and "
+                      f"integration {1e3 * sp['rest']:.2f} ms", flush=True)
     for e in engines:
         rows.append((e, run.n, run.n_bonds, {"wall_s": statistics.median(walls[e]), "walls": walls[e],
                                              "cpu_s": statistics.median(cpus[e]), "cpus": cpus[e],
@@ -183,7 +236,9 @@ def main(argv=None):
     ap.add_argument("--yade-n", type=int, default=10_000)
     ap.add_argument("--yade-steps", type=int, default=20)
     ap.add_argument("--packing", default="fcc,random", help="comma-separated decks: fcc, random")
-    ap.add_argument("--skip", default="", help="comma-separated engines to leave out (dda, liggghts, yade)")
+    ap.add_argument("--skip", default="",
+                    help="comma-separated engines to leave out (dda, dda-central, liggghts, yade)")
+    ap.add_argument("--split", action="store_true", help="in-house time per step: bonds, contacts, the rest")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -194,7 +249,7 @@ def main(argv=None):
     bad = [p for p in packings if p not in DENSITY]
     if bad:
         ap.error(f"--packing: unknown {', '.join(bad)} (choose from {', '.join(DENSITY)})")
-    if "dda" not in skip:
+    if not {"dda", "dda-central"} <= skip:
         compile_inhouse()
     table = []
     tmp = Path(tempfile.mkdtemp(prefix="bench_adapters_"))
@@ -202,7 +257,7 @@ def main(argv=None):
         results = [(p, bench_deck(p, args, skip, tmp)) for p in packings]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    print(f"\n{'deck':<7} {'engine':<9} {'spheres':>8} {'bonds':>8} {'steps':>6} {'wall s':>8} "
+    print(f"\n{'deck':<7} {'engine':<33} {'spheres':>8} {'bonds':>8} {'steps':>6} {'wall s':>8} "
           f"{'particle-steps/s':>17} {'ratio':>6} {'cpu s':>7} {'p-steps/cpu-s':>14} {'ratio':>6}")
     for packing, rows in results:
         rate = {name: n * r["steps"] / r["wall_s"] for name, n, _, r in rows}
@@ -211,11 +266,13 @@ def main(argv=None):
         for name, n, nb, r in rows:
             ratio = rate[name] / ref if ref else float("nan")
             cratio = crate[name] / cref if cref else float("nan")
-            print(f"{packing:<7} {name:<9} {n:8d} {nb:8d} {r['steps']:6d} {r['wall_s']:8.3f} {rate[name]:17.4g} "
+            print(f"{packing:<7} {LABELS.get(name, name):<33} {n:8d} {nb:8d} {r['steps']:6d} {r['wall_s']:8.3f} "
+                  f"{rate[name]:17.4g} "
                   f"{ratio:6.2f} {r.get('cpu_s', float('nan')):7.3f} {crate[name]:14.4g} {cratio:6.2f}")
             table.append({"deck": packing, "engine": name, "spheres": n, "bonds": nb, **r,
                           "particle_steps_per_s": rate[name], "ratio": ratio,
                           "particle_steps_per_cpu_s": crate[name], "cpu_ratio": cratio})
+    print(f"load average (1, 5, 15 min) at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     if args.json:
         args.json.write_text(json.dumps({"rows": table}, indent=2))
 

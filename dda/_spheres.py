@@ -20,15 +20,21 @@ One step (central difference exactly as the block engine, dt(0) = 0 so the first
 4. bonds: a normal spring kn_b on the change of the centre distance from its initial value (tension and
    compression) and a shear spring ks_b on the incremental tangential displacement at the bond point; a bond
    breaks when its tensile force would exceed its tensile strength or its shear force its shear strength;
-   the energy left in its springs is released (counted as dissipated); the step it broke is recorded;
+   the energy left in its springs is released (counted as dissipated); the step it broke is recorded.
+   Central bonds (ks_b = 0, as LIGGGHTS' harmonic bonds) carry the normal spring alone (no shear force, no
+   torque, no shear breakage) and have a loop of their own over compact rows (``CI``, ``CB``), so that a model
+   of central bonds costs one normal spring per bond;
 5. central difference for the free spheres (Cundall's local damping as an option).
 Energy = [kinetic (product form), potential, elastic (contacts, joints and bonds), friction (+ released),
 damping, local damping]; the last three cumulative.
 
-Memory layout of the hot loop: the sphere state is copied into one row per sphere (``P``: position, velocity,
-angular velocity, force, torque) for the duration of a call, and the bond constants and state live in one
-row per bond (``BB``: rest length, kn, ks, tensile and shear force, damping ratio, shear displacement, normal
-force, r_i / (r_i + r_j)), so that a bond touches two sphere rows and one bond row.
+Memory layout of the hot loop: the sphere state is copied into rows for the duration of a call: ``PA``
+(position, force: 8 doubles), ``PB`` (velocity, angular velocity: 8 doubles), ``TQ`` (torque: 4 doubles), rows
+aligned to their size by the caller; the bond constants and state live in one row per bond (``BB``: rest
+length, kn, ks, tensile and shear force, damping ratio, shear displacement, normal force, r_i / (r_i + r_j)).
+A central bond touches one 64-byte row PA of each sphere, two sphere indices and one 24-byte row ``CB`` (rest
+length, kn, tensile force): its loop runs over half the memory that whole sphere rows would take, which
+matters more than its arithmetic (the spheres a bond joins lie far apart in memory for a part of the bonds).
 """
 from __future__ import annotations
 
@@ -386,10 +392,10 @@ def _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_in
 @njit(cache=True, fastmath=SAFE_FAST)
 def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
                 x, v, w, r, m, inertia, fixed, kin, bforce, lawrow, wall_lawrow,
-                bi, bj, BB, b_intact, b_break, bstart, bnbr, bidx,
+                bi, bj, BB, b_intact, b_break, bstart, bnbr, bidx, bfull, cidx, CI, CB, cfn, czeta,
                 ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
                 wvert, wfn, wfd, wfv_start, wfv, wface_start, waabb,
-                nl_pairs, nl_n, nl_flag, x_ref, skin, P,
+                nl_pairs, nl_n, nl_flag, x_ref, skin, PA, PB, TQ,
                 cur, c_n, c_key, c_us, c_fn, c_ij, htab, energy, acc, stats):
     """Advance `nsteps` steps. Returns (status, steps done). See the module docstring.
 
@@ -398,26 +404,37 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
     rebuild (set when a sphere has moved by more than skin / 2 since, or a broken bond does not fit the list).
     ``acc = [work of the prescribed spheres]``; ``stats = [contacts, wall contacts, intact bonds, broken this
     chunk, contacts needed, pairs needed, active joints, pair-list builds]``; ``b_break`` gets the time a
-    bond broke."""
+    bond broke. Bonds with a shear spring: ``bfull`` (indices into the bond arrays, in order); central bonds
+    (ks = 0): ``cidx`` (their bond indices), ``CI`` their spheres (i, j; i stored as -1 - i while the bond is
+    broken, set from ``b_intact`` on entry), ``CB`` one row each (rest length, kn, tensile force), ``cfn`` their
+    normal force (written in the last step of the call), ``czeta`` their damping ratios (read only when it has
+    entries: an empty array stands for undamped central bonds)."""
     n = x.shape[0]
-    nbond = bi.shape[0]
+    nbond = bfull.shape[0]
+    ncen = cidx.shape[0]
+    cdamped = czeta.shape[0] > 0
+    for q in range(ncen):
+        i = CI[q, 0]
+        if (i >= 0) != b_intact[cidx[q]]:
+            CI[q, 0] = -1 - i
+            cfn[q] = 0.0
     njoint = ji.shape[0]
     nwall = waabb.shape[0]
     cap = c_key.shape[1]
     ncap = nl_pairs.shape[0]
-    # one row per sphere in P (position, velocity, angular velocity, force, torque: copied in here and out at
-    # the end) and per bond in BB (length, kn, ks, ft, fs, damping ratio, shear displacement (3), normal force,
-    # r_i / (r_i + r_j)): the bond loop reads and writes two sphere rows and one bond row
+    # sphere state in rows (copied in here and out at the end): PA (position, force: the 64 bytes a central bond
+    # touches), PB (velocity, angular velocity), TQ (torque); bond constants and state in one row per bond in BB
+    # (length, kn, ks, ft, fs, damping ratio, shear displacement (3), normal force, r_i / (r_i + r_j))
     for i in range(n):
         for a in range(3):
-            P[i, a] = x[i, a]
-            P[i, 3 + a] = v[i, a]
-            P[i, 6 + a] = w[i, a]
-    X = P[:, 0:3]
-    V = P[:, 3:6]
-    W = P[:, 6:9]
-    force = P[:, 9:12]
-    torque = P[:, 12:15]
+            PA[i, a] = x[i, a]
+            PB[i, a] = v[i, a]
+            PB[i, 3 + a] = w[i, a]
+    X = PA[:, 0:3]
+    force = PA[:, 3:6]
+    V = PB[:, 0:3]
+    W = PB[:, 3:6]
+    torque = TQ[:, 0:3]
     res = np.zeros(3)
     cpt = np.empty(3)
     c = np.empty(3)
@@ -540,7 +557,8 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
         # added to its row
         ci = -1
         g0 = g1 = g2 = h0 = h1 = h2 = 0.0
-        for k in range(nbond):
+        for kk in range(nbond):
+            k = bfull[kk]
             if not b_intact[k]:
                 continue
             i = bi[k]
@@ -663,6 +681,75 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
             torque[ci, 0] -= h0
             torque[ci, 1] -= h1
             torque[ci, 2] -= h2
+        # central bonds (ks = 0): the normal spring alone, force along the centre line, no torque
+        ci = -1
+        g0 = g1 = g2 = 0.0
+        last = step == nsteps - 1
+        for q in range(ncen):
+            i = CI[q, 0]
+            if i < 0:
+                continue
+            j = CI[q, 1]
+            if i != ci:
+                if ci >= 0:
+                    force[ci, 0] -= g0
+                    force[ci, 1] -= g1
+                    force[ci, 2] -= g2
+                ci = i
+                g0 = g1 = g2 = 0.0
+            d0 = X[j, 0] - X[i, 0]
+            d1 = X[j, 1] - X[i, 1]
+            d2 = X[j, 2] - X[i, 2]
+            dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            stretch = dl - CB[q, 0]
+            fn = CB[q, 1] * stretch  # tension > 0
+            if fn > CB[q, 2]:
+                k = cidx[q]
+                CI[q, 0] = -1 - i
+                b_intact[k] = False
+                b_break[k] = t
+                BB[k, 9] = 0.0
+                cfn[q] = 0.0
+                res[1] += 0.5 * CB[q, 1] * stretch * stretch
+                nbroken += 1
+                if (fixed[i] or kin[i]) and (fixed[j] or kin[j]):
+                    continue
+                if nl_n[0] < ncap:
+                    nl_pairs[nl_n[0], 0] = i
+                    nl_pairs[nl_n[0], 1] = j
+                    nl_n[0] += 1
+                else:
+                    nl_flag[0] = 1
+                continue
+            nint += 1
+            if last:
+                cfn[q] = fn
+            e_bond += 0.5 * CB[q, 1] * stretch * stretch
+            # force on j: -(fn + cdn vn) n, n = d / dl
+            s = fn
+            if cdamped and czeta[q] > 0.0:
+                inv = 1.0 / dl
+                vn = ((V[j, 0] - V[i, 0]) * d0 + (V[j, 1] - V[i, 1]) * d1 + (V[j, 2] - V[i, 2]) * d2) * inv
+                si = fixed[i] or kin[i]
+                sj = fixed[j] or kin[j]
+                meff = m[j] if si and not sj else (m[i] if sj and not si else m[i] * m[j] / (m[i] + m[j]))
+                cdn = 2.0 * czeta[q] * np.sqrt(CB[q, 1] * meff)
+                res[2] += cdn * vn * vn * dt
+                s += cdn * vn
+            s = -s / dl
+            f0 = s * d0
+            f1 = s * d1
+            f2 = s * d2
+            force[j, 0] += f0
+            force[j, 1] += f1
+            force[j, 2] += f2
+            g0 += f0
+            g1 += f1
+            g2 += f2
+        if ci >= 0:
+            force[ci, 0] -= g0
+            force[ci, 1] -= g1
+            force[ci, 2] -= g2
         # 4. central difference (and the largest move since the pair list was built)
         dtavg = 0.5 * (dt + dt_prev)
         ke = 0.0

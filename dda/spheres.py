@@ -34,7 +34,10 @@ bond list whose ``bonded`` flag is set): a normal spring on the change of centre
 on the tangential displacement at the bond point; ``BondLaw`` gives them from a bond modulus over the bond
 area A = pi (radius_factor min(r_i, r_j))^2 and length L0 = initial centre distance (kn = E A / L0, ks =
 shear_ratio kn) or directly as ``kn`` / ``ks`` [N/m]; the tensile and shear strengths [Pa] times A are the
-forces at which the bond breaks (for good). Bond states are reported per record (``SphereResults.bonds``)
+forces at which the bond breaks (for good). Bonds with ks = 0 (``shear_ratio=0`` or ``ks=0``) are central
+springs, as LIGGGHTS' harmonic bonds: the normal spring alone, no shear force, no torque, no shear breakage
+(a loop of their own in the kernel, about the cost of one spring per bond); their spheres still turn under
+contact friction. Bond states are reported per record (``SphereResults.bonds``)
 and the time each bond broke in ``bond_break_time`` (-1: intact).
 
 Smooth joints (``SphereSet.add_joints(pairs, normals, friction_deg)``, the pairs a joint cuts; a DDA scene adds
@@ -65,7 +68,7 @@ from .simulation import BlowUpError, ContactLaw
 @dataclass
 class BondLaw:
     young: float | None = 1e9      # bond modulus [Pa] (kn = young A / L0), unless kn is given
-    shear_ratio: float = 0.4       # ks / kn, unless ks is given
+    shear_ratio: float = 0.4       # ks / kn, unless ks is given; 0: central bonds (normal spring only)
     tensile: float = math.inf      # tensile strength [Pa] on the bond area
     shear: float = math.inf        # shear strength [Pa] on the bond area
     damping: float = 0.0           # ratio of critical viscous damping of the bond springs
@@ -76,12 +79,12 @@ class BondLaw:
     def check(self):
         if self.kn is None and not (self.young is not None and self.young > 0):
             raise ValueError(f"bond modulus must be > 0 (got {self.young!r})")
-        for name in ("kn", "ks"):
-            val = getattr(self, name)
-            if val is not None and not val > 0:
-                raise ValueError(f"bond {name} must be > 0 (got {val!r})")
-        if not (self.shear_ratio > 0 and self.radius_factor > 0):
-            raise ValueError("bond shear_ratio and radius_factor must be > 0")
+        if self.kn is not None and not self.kn > 0:
+            raise ValueError(f"bond kn must be > 0 (got {self.kn!r})")
+        if self.ks is not None and not self.ks >= 0:
+            raise ValueError(f"bond ks must be >= 0 (got {self.ks!r})")
+        if not (self.shear_ratio >= 0 and self.radius_factor > 0):
+            raise ValueError("bond shear_ratio must be >= 0 and radius_factor > 0")
         if not (self.tensile >= 0 and self.shear >= 0 and self.damping >= 0):
             raise ValueError("bond strengths and damping must be >= 0")
 
@@ -270,6 +273,13 @@ def _wall_arrays(walls):
             np.array(fstart, np.int64), np.array(boxes, float).reshape(-1, 6))
 
 
+def _aligned_rows(n, width, align=64):
+    """Zeroed (n, width) float array whose rows start on `align`-byte boundaries (width * 8 a multiple of it)."""
+    buf = np.zeros(n * width + align // 8)
+    off = (-buf.ctypes.data % align) // 8
+    return buf[off:off + n * width].reshape(n, width)
+
+
 class SphereSimulation:
     """Explicit run of a SphereSet (and fixed polyhedral walls): the sphere counterpart of dda.Simulation.
 
@@ -340,7 +350,20 @@ class SphereSimulation:
         self.bond_us = self.bond_rows[:, 6:9]
         self.bond_intact = np.ones(ss.n_bonds, bool)
         self.bond_fn = self.bond_rows[:, 9]
-        self.sphere_rows = np.zeros((n, 16))
+        # central bonds (ks = 0): their own compact rows (dda/_spheres.py); bond_fn gets their normal force back
+        # after each call
+        central = ss.bond_ks == 0.0
+        self.bond_full = np.flatnonzero(~central).astype(np.int64)
+        self.cbond_idx = np.flatnonzero(central).astype(np.int64)
+        self.cbond_ij = np.ascontiguousarray(np.c_[ss.bond_i[central], ss.bond_j[central]].astype(np.int32))
+        self.cbond_rows = np.zeros((len(self.cbond_idx), 3))
+        self.cbond_fn = np.zeros(len(self.cbond_idx))
+        self.cbond_rows[:, 0] = ss.bond_len0[central]
+        self.cbond_rows[:, 1] = ss.bond_kn[central]
+        self.cbond_rows[:, 2] = ss.bond_ft[central]
+        zc = ss.bond_zeta[central]
+        self.cbond_zeta = np.ascontiguousarray(zc, float) if np.any(zc > 0) else np.zeros(0)
+        self.sphere_rows = (_aligned_rows(n, 8), _aligned_rows(n, 8), _aligned_rows(n, 4, 32))
         self.bond_break_time = np.full(ss.n_bonds, -1.0)
         self.bkey_tab, self.bkey_slot = _sp.build_bond_hash(ss.bond_i, ss.bond_j, n)
         # bonds per sphere (CSR on the lower index): the pair-list build skips bonded pairs with it
@@ -505,6 +528,8 @@ class SphereSimulation:
         if len(self.wall_lawrow):
             kn = max(kn, self.wall_lawrow[:, 0].max())
             ks = max(ks, self.wall_lawrow[:, 1].max())
+        # four contacts on every sphere: they also bound the rotation of spheres on central bonds (ks = 0, no
+        # rotational stiffness from their bonds)
         K = np.full(ss.n, 4.0 * max(kn, 3.5 * ks))
         if ss.n_bonds:
             kb = np.maximum(ss.bond_kn, 3.5 * ss.bond_ks)
@@ -524,15 +549,18 @@ class SphereSimulation:
                 self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
                 self.lawrow, self.wall_lawrow,
                 ss.bond_i, ss.bond_j, self.bond_rows, self.bond_intact, self.bond_break_time, self.bond_start,
-                self.bond_nbr, self.bond_idx, self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi,
+                self.bond_nbr, self.bond_idx, self.bond_full, self.cbond_idx, self.cbond_ij, self.cbond_rows,
+                self.cbond_fn, self.cbond_zeta, self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi,
                 self.joint_on, self.joint_init, self.joint_slide, self.joint_us, self.joint_sign, self.jkey_tab,
                 self.jkey_slot,
                 self.wvert, self.wfn, self.wfd, self.wfv_start, self.wfv, self.wface_start, self.waabb,
-                self.nl_pairs, self.nl_n, self.nl_flag, self.x_ref, self.skin, self.sphere_rows,
+                self.nl_pairs, self.nl_n, self.nl_flag, self.x_ref, self.skin, *self.sphere_rows,
                 self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab, self.energy, self.acc,
                 self.stats)
             if done:
                 self.dt_prev = self.dt
+            if len(self.cbond_idx):
+                self.bond_rows[self.cbond_idx, 9] = self.cbond_fn
             self.steps += done
             self.time += done * self.dt
             nsteps -= done
