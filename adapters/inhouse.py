@@ -3,7 +3,8 @@
 ``run_inhouse(run, out=None, progress=None)`` builds the SphereSet and SphereSimulation of the run
 (``run.in_house()``: bonds in run.bond_i/j order with their kn, ks, ft, fs and rest lengths, the cut pairs on
 joints as smooth joints with run.joint_normal and run.joint_friction_deg when run.smooth_joints, the contact
-law, gravity, run.dt, Cundall local damping), steps it run.steps times and records every run.record_steps
+law, gravity, run.dt, Cundall local damping, the constant sphere forces run.force and the prescribed
+velocities run.velocity of run.prescribed), steps it run.steps times and records every run.record_steps
 steps (first record at t = 0): series ``kinetic`` (translational + rotational energy of the free spheres [J])
 and ``bonds_intact``, positions when n * records <= 5e6, and the final positions, velocities and bond states.
 The in-house engine does every feature of the run exactly (it is the reference the decks are compared with),
@@ -63,7 +64,9 @@ def reordered(run, perm):
                   bond_len0=np.asarray(run.bond_len0)[border], bond_kn=np.asarray(run.bond_kn)[border],
                   bond_ks=np.asarray(run.bond_ks)[border], bond_ft=np.asarray(run.bond_ft)[border],
                   bond_fs=np.asarray(run.bond_fs)[border], joint_i=ji, joint_j=jj,
-                  joint_disc=np.asarray(run.joint_disc)[jorder], joint_normal=normal, cut_i=ci, cut_j=cj)
+                  joint_disc=np.asarray(run.joint_disc)[jorder], joint_normal=normal, cut_i=ci, cut_j=cj,
+                  force=np.asarray(run.force, float)[perm], prescribed=np.asarray(run.prescribed, bool)[perm],
+                  velocity=np.asarray(run.velocity, float)[perm])
     return new, border
 
 

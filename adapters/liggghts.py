@@ -8,12 +8,21 @@ Common to every variant: ``units si``, ``atom_style hybrid granular molecular``,
 ``communicate single vel yes``, fixed boundaries around the model (``deck_box``: four radii, plus the
 free-fall distance over the run along gravity; ``liggghts_box_margin`` in run.extra for one margin on every
 side), one time step run.dt, gravity by ``fix gravity``. Atom type = colour + 1 (1 intact, 2 red, 3 green,
-4 blue), + 4 for fixed spheres (group ``fixed``: never integrated, zero velocity). Contacts:
+4 blue), + 4 for fixed and prescribed spheres (group ``fixed``: never integrated; zero velocity unless
+prescribed). Contacts:
 ``pair_style gran model hooke/stiffness tangential history`` with absolute (constant) stiffness kn = run.kn
 and kt = run.ks [N/m] (``fix property/global kn / kt peratomtypepair``), Coulomb friction tan(run.friction_deg)
 (green-blue pairs: tan(run.joint_friction_deg)), normal viscous damping gamman_abs = 2 run.damping
 sqrt(kn m_eff) (m_eff of the mean sphere: m/2 free-free, m
 free-fixed) and ``limitForce on``; no tangential damping (as the in-house contact law).
+
+Loads (run.force, run.prescribed / run.velocity): the spheres of one distinct force vector form a group
+``ldK`` with ``fix afK ldK addforce fx fy fz`` (added to gravity every step); the spheres of one distinct
+prescribed velocity form a group ``pvK`` (typed like fixed spheres, so they are not integrated and their
+contacts damp with the free sphere's mass, as in-house) with ``velocity pvK set`` and ``fix mvK pvK move linear
+vx vy vz`` (position x0 + v t exactly, no rotation). Groups list atom ids as ranges ``a:b``; LIGGGHTS holds at
+most 32 groups, so a deck takes at most MAX_LOAD_GROUPS distinct force and velocity vectors. The box covers the
+prescribed spheres' paths and the travel of forced spheres over the run.
 
 Variants:
 
@@ -39,8 +48,8 @@ Variants:
   not bond_ft.
 - ``clumps``: rigid bodies, ``fix rigid molecule`` with molecule id = connected component of the run's bond
   graph; spheres without bonds stay free granular atoms (one-atom rigid bodies are an error); a component with a
-  fixed sphere is fixed as a whole; contacts inside a body are excluded (``neigh_modify exclude molecule``).
-  Bodies never break and never deform.
+  fixed sphere is fixed as a whole, one with a prescribed sphere moves at its velocity as a whole; contacts
+  inside a body are excluded (``neigh_modify exclude molecule``). Bodies never break and never deform.
 
 What LIGGGHTS-PUBLIC cannot do exactly (listed per run in RunResult.extra["approximations"]):
 
@@ -81,11 +90,12 @@ import numpy as np
 from ._liggghts_io import DUMP_COLUMNS, DUMP_FORMAT, MARK, Driver, DriverError, read_dump, write_data
 from .process import EngineError, describe_failure, find_engine, unbuffered
 from .result import COMPLETE, INCOMPLETE, RunResult
-from .spec import SphereRun
+from .spec import SpecError, SphereRun
 
 VARIANTS = ("bonds", "sjkr", "clumps")
 N_TYPES = 8  # colour (4) x fixed (2)
 POS_LIMIT = 5_000_000
+MAX_LOAD_GROUPS = 24  # LIGGGHTS holds 32 groups: all, fixed, single, movable, clump and the load groups
 
 
 # -- deck ------------------------------------------------------------------------------------------------
@@ -114,11 +124,76 @@ def clump_molecules(run: SphereRun):
     fixed_comp = np.zeros(lab.max() + 1, bool)
     fixed_comp[lab[np.asarray(run.fixed, bool)]] = True
     fixed = fixed_comp[lab]
-    body = (size > 1) & ~fixed
+    body = (size > 1) & ~fixed & ~clump_prescribed(run)[0]
     order = np.r_[np.unique(lab[body]), np.setdiff1d(np.unique(lab), np.unique(lab[body]))]
     new_id = np.empty(lab.max() + 1, np.int64)
     new_id[order] = np.arange(1, len(order) + 1)
     return new_id[lab], fixed, int(len(np.unique(lab[body])))
+
+
+def clump_prescribed(run: SphereRun):
+    """(prescribed (n,), velocity (n, 3)) of the clumps variant: every sphere of a bonded component that holds a
+    prescribed sphere moves at that sphere's velocity (SpecError when a component holds two velocities, or a
+    fixed and a prescribed sphere)."""
+    n = run.n
+    p = np.asarray(run.prescribed, bool) & ~np.asarray(run.fixed, bool)
+    if not p.any():
+        return np.zeros(n, bool), np.zeros((n, 3))
+    lab, _ = components(run)
+    k = lab.max() + 1
+    comp_p = np.zeros(k, bool)
+    comp_p[lab[p]] = True
+    vel = np.zeros((k, 3))
+    vel[lab[p]] = run.velocity[p]
+    if np.any(vel[lab[p]] != run.velocity[p]):
+        raise SpecError(f"{run.source or run.name}: clumps variant: a bonded component holds spheres with different "
+                        "prescribed velocities (it moves as one rigid body)")
+    comp_f = np.zeros(k, bool)
+    comp_f[lab[np.asarray(run.fixed, bool)]] = True
+    if np.any(comp_f & comp_p):
+        raise SpecError(f"{run.source or run.name}: clumps variant: a bonded component holds a fixed and a "
+                        "prescribed sphere (it moves as one rigid body)")
+    return comp_p[lab], np.where(comp_p[lab][:, None], vel[lab], 0.0)
+
+
+def _id_lines(group, idx, per_line=400):
+    """``group NAME id ...`` commands for the 0-based sphere indices `idx` (atom ids as ranges a:b, several
+    lines for long lists: a repeated group command adds to the group)."""
+    ids = np.sort(np.asarray(idx, np.int64)) + 1
+    if not len(ids):
+        return []
+    runs = np.split(ids, np.flatnonzero(np.diff(ids) != 1) + 1)
+    tokens = [f"{r[0]}" if len(r) == 1 else f"{r[0]}:{r[-1]}" for r in runs]
+    return [f"group {group} id " + " ".join(tokens[s:s + per_line]) for s in range(0, len(tokens), per_line)]
+
+
+def load_groups(run: SphereRun, variant="bonds"):
+    """(prescribed (n,), velocity (n, 3), [(vector, indices)] of the distinct prescribed velocities,
+    [(vector, indices)] of the distinct forces on free spheres) of a deck; SpecError beyond MAX_LOAD_GROUPS."""
+    fixed = np.asarray(run.fixed, bool)
+    if variant == "clumps":
+        pres, vel = clump_prescribed(run)
+        fixed = clump_molecules(run)[1]
+    else:
+        pres = np.asarray(run.prescribed, bool) & ~fixed
+        vel = np.where(pres[:, None], run.velocity, 0.0)
+
+    def distinct(mask, values):
+        idx = np.flatnonzero(mask)
+        if not len(idx):
+            return []
+        u, inv = np.unique(values[idx], axis=0, return_inverse=True)
+        inv = np.asarray(inv).reshape(-1)
+        return [(u[k], idx[inv == k]) for k in range(len(u))]
+
+    force = np.asarray(run.force, float)
+    vgroups = distinct(pres, vel)
+    fgroups = distinct(np.any(force != 0.0, axis=1) & ~fixed & ~pres, force)
+    if len(vgroups) + len(fgroups) > MAX_LOAD_GROUPS:
+        raise SpecError(f"{run.source or run.name}: {len(fgroups)} distinct sphere forces and {len(vgroups)} "
+                        f"distinct prescribed velocities: a LIGGGHTS deck takes at most {MAX_LOAD_GROUPS} "
+                        "(one group each)")
+    return pres, vel, vgroups, fgroups
 
 
 def _mean_mass(run):
@@ -152,28 +227,39 @@ MAX_BINS = 10_000_000
 def deck_box(run: SphereRun):
     """(lo, hi) of the fixed-boundary box: the model's bounding box plus four radii, extended along gravity by
     1.1 times the free-fall distance over the run (capped so that the neighbour bins of the box stay below
-    MAX_BINS: LIGGGHTS bins the whole box). run.extra ``liggghts_box_margin`` [m] sets one margin for every
-    side instead. Particles leaving the box are lost (the runner stops with an error)."""
+    MAX_BINS: LIGGGHTS bins the whole box), and likewise along the acceleration of spheres under a constant
+    force (gravity + force / mass); the box holds the prescribed spheres' whole paths. run.extra
+    ``liggghts_box_margin`` [m] sets one margin for every side instead. Particles leaving the box are lost (the
+    runner stops with an error)."""
     rmax = float(np.max(run.radii))
-    lo = run.centers.min(0) - rmax
-    hi = run.centers.max(0) + rmax
+    pres = np.asarray(run.prescribed, bool) & ~np.asarray(run.fixed, bool)
+    ends = np.asarray(run.centers, float)[pres] + np.asarray(run.velocity, float)[pres] * run.duration
+    pts = np.r_[np.asarray(run.centers, float), ends]
+    lo = pts.min(0) - rmax
+    hi = pts.max(0) + rmax
     if "liggghts_box_margin" in run.extra:
         m = float(run.extra["liggghts_box_margin"])
         return lo - m, hi + m
     lo, hi = lo - 4.0 * rmax, hi + 4.0 * rmax
-    fall = 0.55 * np.abs(np.asarray(run.gravity, float)) * run.duration ** 2
+    acc = np.asarray(run.gravity, float).reshape(1, 3)
+    loaded = np.any(np.asarray(run.force) != 0.0, axis=1) & ~np.asarray(run.fixed, bool) & ~pres
+    if loaded.any():  # spheres under a constant force: their own acceleration (free, the fastest they can go)
+        m = run.density * 4.0 / 3.0 * math.pi * np.asarray(run.radii, float)[loaded] ** 3
+        acc = np.r_[acc, acc + np.asarray(run.force, float)[loaded] / m[:, None]]
     b = max(rmax, 0.5 * (2.0 * rmax + 0.3 * float(np.min(run.radii))))  # about LIGGGHTS' bin size
     for a in range(3):
-        if fall[a] <= 0:
-            continue
-        others = [k for k in range(3) if k != a]
-        lateral = float(np.prod([(hi[k] - lo[k]) / b for k in others]))
-        cap = MAX_BINS / lateral * b - (hi[a] - lo[a])
-        ext = min(fall[a], max(cap, 0.0))
-        if run.gravity[a] < 0:
-            lo[a] -= ext
-        else:
-            hi[a] += ext
+        for sign in (-1.0, 1.0):
+            fall = 0.55 * max(0.0, float((sign * acc[:, a]).max())) * run.duration ** 2
+            if fall <= 0:
+                continue
+            others = [k for k in range(3) if k != a]
+            lateral = float(np.prod([(hi[k] - lo[k]) / b for k in others]))
+            cap = MAX_BINS / lateral * b - (hi[a] - lo[a])
+            ext = min(fall, max(cap, 0.0))
+            if sign < 0:
+                lo[a] -= ext
+            else:
+                hi[a] += ext
     return lo, hi
 
 
@@ -199,6 +285,8 @@ def approximations(run: SphereRun, variant):
         out.append("green-blue pairs are non-cohesive whichever joint they belong to")
     if variant == "clumps":
         out.append("bonded components are rigid bodies (fix rigid molecule): no bond deformation or breakage")
+        if np.any(np.asarray(run.prescribed, bool) & ~np.asarray(run.fixed, bool)):
+            out.append("a bonded component with a prescribed sphere moves at its velocity as a whole")
     if variant == "bonds" and bond_gap(run) > 0:
         out.append(f"contact radius r (1 - {bond_gap(run):g}) (masses kept): bonded pairs get the granular "
                    f"contact only beyond a compressive strain of about {2 * bond_gap(run):g}")
@@ -282,7 +370,8 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     n_bodies = 0
     if variant == "clumps":
         mol, fixed, n_bodies = clump_molecules(run)
-    types = atom_types(run, fixed)
+    pres, _, vgroups, fgroups = load_groups(run, variant)
+    types = atom_types(run, fixed | pres)  # prescribed spheres: typed as fixed (not integrated)
     box = deck_box(run)
     bonds = None
     if variant == "bonds":
@@ -343,6 +432,12 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
               "pair_style gran model hooke/stiffness tangential history absolute_damping on "
               "tangential_damping off limitForce on"]
     L += ["pair_coeff * *", "group fixed type 5 6 7 8", "velocity fixed set 0 0 0"]
+    for k, (v, idx) in enumerate(vgroups, 1):  # prescribed velocities: x = x0 + v t, whatever the forces
+        L += _id_lines(f"pv{k}", idx)
+        L += [f"velocity pv{k} set {_matrix(v)}", f"fix mv{k} pv{k} move linear {_matrix(v)}"]
+    for k, (f, idx) in enumerate(fgroups, 1):  # constant forces on each sphere
+        L += _id_lines(f"ld{k}", idx)
+        L.append(f"fix af{k} ld{k} addforce {_matrix(f)}")
     if variant == "clumps" and n_bodies:
         L += ["group movable subtract all fixed", "group single subtract movable clump"]
     else:
@@ -431,9 +526,9 @@ def _run_deck(folder, out, nprocs, timeout, progress):
     n = run.n
     mass = run.density * 4.0 / 3.0 * math.pi * run.radii ** 3
     inertia = 0.4 * mass * run.radii ** 2
-    mobile = ~np.asarray(run.fixed, bool)
+    mobile = ~np.asarray(run.fixed, bool) & ~np.asarray(run.prescribed, bool)
     if variant == "clumps":
-        mobile = ~clump_molecules(run)[1]
+        mobile = ~clump_molecules(run)[1] & ~clump_prescribed(run)[0]
     breakable = np.flatnonzero(np.isfinite(run.bond_ft)) if variant == "bonds" else np.zeros(0, np.int64)
     contact_reach = None
     if variant == "sjkr":  # a bond counts as intact while its pair is in (adhesive) contact
@@ -546,4 +641,4 @@ def _run_deck(folder, out, nprocs, timeout, progress):
 
 
 __all__ = ["write_deck", "run_deck", "VARIANTS", "atom_types", "components", "clump_molecules",
-           "cohesion_matrix", "approximations"]
+           "cohesion_matrix", "approximations", "clump_prescribed", "load_groups", "MAX_LOAD_GROUPS"]

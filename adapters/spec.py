@@ -15,7 +15,11 @@ in-house (dda.spheres), in YADE or in LIGGGHTS:
   ``joint_friction_deg``); pairs cut by a fault (thickness > 0) are plain frictional contacts;
 - the contact law of every unbonded contact: ``kn``, ``ks`` [N/m], ``friction_deg``, ``damping`` (ratio of
   critical, viscous), and the run: ``gravity``, ``dt`` (one step for every engine), ``duration``,
-  ``record_every``, ``local_damping`` (Cundall's non-viscous damping, as YADE's NewtonIntegrator.damping).
+  ``record_every``, ``local_damping`` (Cundall's non-viscous damping, as YADE's NewtonIntegrator.damping);
+- loads: ``force`` (n, 3) a constant force on each sphere [N] (added to its weight; no effect on fixed or
+  prescribed spheres), ``prescribed`` (n,) bool and ``velocity`` (n, 3) [m/s]: prescribed spheres move at
+  their velocity whatever the forces and do not turn (a platen; ``velocity`` is ignored elsewhere). A sphere
+  cannot be both fixed and prescribed. Runs saved before these arrays existed load with no loads.
 
 Build one from a DDA scene with [spheres] (``from_scene``) or from a model with run settings
 (``from_model``); ``save`` / ``load`` write the arrays to one npz (``run.npz`` of a deck folder) and the
@@ -32,6 +36,8 @@ import numpy as np
 
 ARRAYS = ("centers", "radii", "colour", "fixed", "bond_i", "bond_j", "bond_len0", "bond_kn", "bond_ks", "bond_ft",
           "bond_fs", "joint_i", "joint_j", "joint_disc", "joint_normal", "cut_i", "cut_j", "gravity")
+ARRAYS += ("force", "prescribed", "velocity")  # loads; optional in run.npz files (absent: none)
+OPTIONAL_ARRAYS = ("force", "prescribed", "velocity")
 
 
 class SpecError(ValueError):
@@ -72,6 +78,21 @@ class SphereRun:
     local_damping: float
     source: str = ""
     extra: dict = field(default_factory=dict)  # engine-specific settings (e.g. liggghts bond breakage check)
+    force: np.ndarray | None = None       # (n, 3) constant force on each sphere [N] (None: zeros)
+    prescribed: np.ndarray | None = None  # (n,) bool: moves at `velocity` whatever the forces (None: none)
+    velocity: np.ndarray | None = None    # (n, 3) velocity of the prescribed spheres [m/s] (None: zeros)
+
+    def __post_init__(self):
+        n = len(np.asarray(self.radii).reshape(-1))
+        self.force = np.zeros((n, 3)) if self.force is None else np.asarray(self.force, float).reshape(-1, 3)
+        self.prescribed = (np.zeros(n, bool) if self.prescribed is None
+                           else np.asarray(self.prescribed, bool).reshape(-1))
+        self.velocity = np.zeros((n, 3)) if self.velocity is None else np.asarray(self.velocity, float).reshape(-1, 3)
+
+    @property
+    def loaded(self):
+        """True when some sphere carries a constant force or a prescribed velocity."""
+        return bool(np.any(self.prescribed) or np.any(self.force != 0))
 
     @property
     def n(self):
@@ -106,7 +127,7 @@ class SphereRun:
     @classmethod
     def load(cls, path):
         with np.load(path, allow_pickle=False) as z:
-            kw = {k: z[k] for k in ARRAYS}
+            kw = {k: z[k] for k in ARRAYS if k in z.files or k not in OPTIONAL_ARRAYS}
             kw.update(json.loads(str(z["header"])))
         return cls(**kw)
 
@@ -131,6 +152,9 @@ def _sphere_set(run: SphereRun):
     ss.bond_kn, ss.bond_ks = run.bond_kn.astype(float), run.bond_ks.astype(float)
     ss.bond_ft, ss.bond_fs = run.bond_ft.astype(float), run.bond_fs.astype(float)
     ss.bond_zeta = np.zeros(run.n_bonds)
+    ss.body_force[:] = run.force
+    ss.prescribed[:] = run.prescribed
+    ss.velocity[:] = np.where(run.prescribed[:, None], run.velocity, 0.0)
     if run.smooth_joints and len(run.joint_i):
         ss.add_joints(np.c_[run.joint_i, run.joint_j], run.joint_normal, run.joint_friction_deg)
     return ss
@@ -145,9 +169,11 @@ def joint_pairs(model):
 
 def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None, friction_deg=30.0,
                damping=0.0, joint_friction_deg=None, smooth_joints=True, gravity=(0.0, 0.0, -9.81), dt=None,
-               safety=0.5, duration=0.01, record_every=None, local_damping=0.0, name=None, source=""):
+               safety=0.5, duration=0.01, record_every=None, local_damping=0.0, name=None, source="",
+               force=None, prescribed=None, velocity=None):
     """SphereRun of an sgim model (SphereModel or model.npz path). `bonds`: a dda.spheres.BondLaw (default
-    BondLaw()); `fixed`: (n,) bool or None; dt None: `safety` times the in-house critical step."""
+    BondLaw()); `fixed`: (n,) bool or None; dt None: `safety` times the in-house critical step. Loads: `force`
+    (n, 3) or (3,) [N] on each sphere, `prescribed` (n,) bool, `velocity` (n, 3) or (3,) [m/s] (None: none)."""
     from dda.spheres import BondLaw, SphereSet, SphereSimulation
     from dda.simulation import ContactLaw
 
@@ -178,6 +204,7 @@ def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None
         smooth_joints=bool(smooth_joints), gravity=np.asarray(gravity, float).reshape(3), dt=0.0,
         duration=float(duration), record_every=float(record_every or duration / 100),
         local_damping=float(local_damping), source=str(source))
+    _set_loads(run, force, prescribed, velocity)
     if dt is None:
         sim = SphereSimulation(_sphere_set(run), ContactLaw(kn=run.kn, ks=run.ks, friction_deg=run.friction_deg,
                                                               damping=run.damping), safety=safety)
@@ -186,6 +213,23 @@ def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None
     if not (run.dt > 0 and math.isfinite(run.dt)):
         raise SpecError(f"{source or 'model'}: time step must be > 0 (got {dt!r})")
     return run
+
+
+def _set_loads(run, force, prescribed, velocity):
+    """Check and store the loads of a run (SpecError for wrong shapes, non-finite values, fixed + prescribed)."""
+    n, where = run.n, run.source or "model"
+    try:
+        f = np.broadcast_to(np.asarray(0.0 if force is None else force, float), (n, 3)).copy()
+        p = np.broadcast_to(np.asarray(False if prescribed is None else prescribed, bool), (n,)).copy()
+        v = np.broadcast_to(np.asarray(0.0 if velocity is None else velocity, float), (n, 3)).copy()
+    except ValueError:
+        raise SpecError(f"{where}: force and velocity must be (n, 3) or (3,), prescribed (n,) for n = {n} "
+                        "spheres") from None
+    if not (np.all(np.isfinite(f)) and np.all(np.isfinite(v))):
+        raise SpecError(f"{where}: sphere forces and velocities must be finite")
+    if np.any(p & run.fixed):
+        raise SpecError(f"{where}: {int((p & run.fixed).sum())} spheres are both fixed and prescribed")
+    run.force, run.prescribed, run.velocity = f, p, np.where(p[:, None], v, 0.0)
 
 
 def from_scene(path):
@@ -203,6 +247,7 @@ def from_scene(path):
     sp = scene.spheres
     model = sp["model"]
     fixed = scene.fixed_spheres(model.centers)
+    force, prescribed, velocity = scene.sphere_loads(model.centers)
     law = scene.law
     try:
         return from_model(model, density=sp["density"], fixed=fixed, bonds=sp["bonds"], kn=law.kn, ks=law.ks,
@@ -210,7 +255,7 @@ def from_scene(path):
                           joint_friction_deg=sp.get("joint_friction"), smooth_joints=sp.get("smooth_joints", True),
                           gravity=scene.gravity, dt=scene.dt, safety=scene.safety, duration=scene.duration,
                           record_every=scene.record_every, local_damping=scene.local_damping, name=scene.name,
-                          source=str(path))
+                          source=str(path), force=force, prescribed=prescribed, velocity=velocity)
     except SpecError as exc:
         raise SceneError(Path(path), "spheres.model", sp.get("path"), str(exc).split(": ", 1)[-1]) from None
 

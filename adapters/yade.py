@@ -25,6 +25,11 @@ smooth joints with the run's per-pair normal (signed like the interaction normal
 joint_friction_deg (one normal per pair: no three-joint limit); every other interaction is unbonded (a plain
 frictional contact). A bond-list pair without an interaction fails the run loudly.
 
+Loads: a constant sphere force (run.force) is a permanent force (``O.forces.setPermF``: NewtonIntegrator adds
+it to the weight every step); a prescribed sphere (run.prescribed) gets blockedDOFs xyzXYZ and state.vel =
+run.velocity: YADE moves it at that velocity whatever the forces, and it does not turn (not counted in the
+kinetic energy, as the in-house engine).
+
 Unbonded contacts take kn, ks and friction from materials made per distinct radius with young = kn / r and
 poisson = ks / kn, so that JCFpm's kn = 2 E1 R1 E2 R2 / (E1 R1 + E2 R2) equals run.kn for every pair of radii
 and ks = poisson kn equals run.ks (exact, also for unequal radii). Fixed spheres have blockedDOFs xyzXYZ;

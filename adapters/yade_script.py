@@ -22,6 +22,11 @@ of record_steps steps and records between chunks (exact step counts, as a PyRunn
 A state with non-finite values, or a kinetic energy above 1/2 M_free (r_min / dt)^2 (some sphere then moves
 more than its radius per step), stops the run as a blow-up.
 
+Loads (run.npz ``force``, ``prescribed``, ``velocity``; absent in older decks): a constant force on a sphere is a
+permanent force (``O.forces.setPermF``, kept by ForceResetter, added to gravity by NewtonIntegrator); a
+prescribed sphere has blockedDOFs xyzXYZ and state.vel = its velocity (YADE moves a body with blocked DOFs at
+the velocity it has, whatever the forces, and leaves it out of utils.kineticEnergy, as fixed spheres).
+
 Lines starting with ``FATAL:`` carry the reason of a deliberate failure (the runner surfaces them);
 ``PROGRESS`` lines report the run's advance.
 """
@@ -62,6 +67,11 @@ def main(deck, out):
     radii = np.asarray(z["radii"], float)
     fixed = np.asarray(z["fixed"], bool)
     n = len(radii)
+    files = set(z.files)
+    force = np.asarray(z["force"], float).reshape(-1, 3) if "force" in files else np.zeros((n, 3))
+    prescribed = np.asarray(z["prescribed"], bool) if "prescribed" in files else np.zeros(n, bool)
+    velocity = np.asarray(z["velocity"], float).reshape(-1, 3) if "velocity" in files else np.zeros((n, 3))
+    prescribed &= ~fixed
     bi, bj = np.asarray(z["bond_i"], np.int64), np.asarray(z["bond_j"], np.int64)
     bkn, bks = np.asarray(z["bond_kn"], float), np.asarray(z["bond_ks"], float)
     bft, bfs = np.asarray(z["bond_ft"], float), np.asarray(z["bond_fs"], float)
@@ -87,10 +97,12 @@ def main(deck, out):
         fatal("time step must be > 0")
 
     # -- materials: one per distinct radius, young = kn / r, so that Ip2's kn = 2 E1 R1 E2 R2 / (E1 R1 + E2 R2)
-    # equals kn for every pair of radii and ks = poisson kn (exact contact stiffness for unbonded contacts)
+    # equals kn for every pair of radii and ks = poisson kn (exact contact stiffness for unbonded contacts);
+    # unbreakable strengths: no bond breaks during the bonding step (a sphere moving at its prescribed velocity
+    # already shears its bonds then); every pair gets its own strength right after it
     ur, inv = np.unique(radii, return_inverse=True)
     mats = [JCFpmMat(type=1, young=kn / r, poisson=ks / kn, frictionAngle=math.atan(tan_phi), density=density,
-                     tensileStrength=1.0, cohesion=1.0, jointFrictionAngle=math.atan(tan_joint))
+                     tensileStrength=HUGE, cohesion=HUGE, jointFrictionAngle=math.atan(tan_joint))
             for r in ur.tolist()]
     for mat in mats:
         O.materials.append(mat)
@@ -107,12 +119,19 @@ def main(deck, out):
         st.inertia = (float(inertia[k]),) * 3
         if fixed[k]:
             st.blockedDOFs = "xyzXYZ"
+        elif prescribed[k]:  # moves at its velocity whatever the forces
+            st.blockedDOFs = "xyzXYZ"
+            st.vel = tuple(float(x) for x in velocity[k])
         b.state = st
         bodies.append(b)
     ids = O.bodies.append(bodies)
     if list(ids[:1]) not in ([0], []) or len(ids) != n:
         fatal("unexpected body ids")
     del bodies
+    # constant sphere forces: permanent forces (kept when ForceResetter clears the others each step)
+    loaded = np.flatnonzero(np.any(force != 0.0, axis=1) & ~fixed & ~prescribed)
+    for k in loaded.tolist():
+        O.forces.setPermF(k, tuple(float(x) for x in force[k]))
 
     # bonding step: detect every pair of the bond list (touching within the model's tolerance)
     pairs_i, pairs_j = np.r_[bi, ji], np.r_[bj, jj]
@@ -189,6 +208,8 @@ def main(deck, out):
         if k is not None:
             found_b[k] = True
             ph.kn = float(bkn[k])
+            if ph.ks > 0:  # the shear force of the bonding step (prescribed velocities) with the bond's own ks
+                ph.shearForce = ph.shearForce * (float(bks[k]) / ph.ks)
             ph.ks = float(bks[k])
             ph.FnMax = float(bft[k]) if math.isfinite(bft[k]) and bft[k] > 0 else (HUGE if bft[k] > 0 else TINY)
             ph.FsMax = float(bfs[k]) if math.isfinite(bfs[k]) else HUGE
@@ -227,6 +248,7 @@ def main(deck, out):
     setup = {"detection_factor": f, "bonds": m, "bonds_found": int(found_b.sum()), "bonds_missing": missing_b,
              "joints": int(len(ji)), "joints_found": int(found_j.sum()), "joints_missing": missing_j,
              "unbonded_contacts": unbonded - int(found_j.sum()) - len(apart), "materials": len(mats),
+             "loaded": int(len(loaded)), "prescribed": int(prescribed.sum()),
              "bonding_step_s": t_bond,
              "setup_s": time.time() - t_start}
     with open(os.path.join(out, "yade_setup.json"), "w") as fh:
@@ -280,7 +302,7 @@ def main(deck, out):
                  bond_intact=bond_states(), steps=np.array(O.iter))
 
     # kinetic energy above 1/2 M_free (r_min / dt)^2 means a sphere moving more than r_min per step
-    ke_limit = 0.5 * float(mass[~fixed].sum()) * (float(radii.min()) / dt) ** 2
+    ke_limit = 0.5 * float(mass[~fixed & ~prescribed].sum()) * (float(radii.min()) / dt) ** 2
     snap_cost, snap_last, last_print = 0.0, time.time(), 0.0
     done = 1
     if rec == 1 or steps == 1:

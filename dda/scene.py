@@ -24,11 +24,18 @@ written. Keys::
     [spheres]      model = "model.npz" (an sgim model) or "beam.toml" (an sgim scene, built in memory),
                    relative to the scene; density = 2600, fixed = ["z>2.6"]
                    (regions of fixed spheres), bond_young (Pa) = 1e9 or bond_kn / bond_ks (N/m), bond_shear_ratio
-                   = 0.4, bond_tensile / bond_shear (Pa, default unbreakable), bond_damping, bond_radius_factor = 1;
+                   = 0.4 (0, or bond_ks = 0: central bonds, the normal spring only), bond_tensile / bond_shear
+                   (Pa, default unbreakable), bond_damping, bond_radius_factor = 1;
                    fixed_below = [[dip, dip_direction, x, y, z], ...] (spheres below any of these planes are
                    fixed), smooth_joints = true (pairs the model cuts by a zero-thickness joint slide on the joint
                    plane: contact normal = joint normal), joint_friction (deg, default [contact] friction);
-                   only the model's bonded pairs get bonds; [contact] is the sphere contact law (sphere-sphere,
+                   [[spheres.load]] tables load a region of spheres: region = "z>2.6" (or a list of such cuts,
+                   all of which must hold) or below = [dip, dip_direction, x, y, z], and exactly one of
+                   force = [fx, fy, fz] (a constant force on EACH sphere of the region, N; the forces of
+                   overlapping force loads add up) or velocity = [vx, vy, vz] (m/s: the region's spheres move
+                   at this velocity whatever the forces, without turning, e.g. a platen); a region without a
+                   sphere, a fixed sphere in a loaded region, or a prescribed sphere under a second load is an
+                   error; only the model's bonded pairs get bonds; [contact] is the sphere contact law (sphere-sphere,
                    sphere-block and, with [[contact_pair]], block-block); blocks are fixed walls or moving
                    blocks stepped in one loop with the spheres (see dda/spheres.py, dda/_coupled.py)
     [output]       formats = ["npz", "csv", "vtu", "png"]
@@ -51,6 +58,8 @@ TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact
             "output", "render", "load", "spheres"}
 SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", "bond_shear_ratio", "bond_tensile",
                "bond_shear", "bond_damping", "bond_radius_factor", "joint_friction", "smooth_joints", "fixed_below"}
+SPHERE_KEYS |= {"load"}  # [[spheres.load]]: loaded regions (constant force or prescribed velocity)
+SPHERE_LOAD_KEYS = {"region", "below", "force", "velocity"}
 LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
 
 
@@ -93,6 +102,11 @@ class DDAScene:
         sp = self.spheres
         ss = load_model(sp["model"], density=sp["density"], bonds=sp["bonds"])
         ss.fixed |= self.fixed_spheres(ss.centers)
+        if sp.get("loads"):  # [[spheres.load]]: constant forces and prescribed velocities
+            force, prescribed, velocity = self.sphere_loads(ss.centers)
+            ss.body_force += force
+            ss.prescribed |= prescribed
+            ss.velocity[prescribed] = velocity[prescribed]
         moving = not all(getattr(b, "fixed", False) for b in self.blocks)
         if sp.get("smooth_joints", True) and hasattr(sp["model"], "joint_pairs"):
             # pairs cut by a zero-thickness joint slide on the joint plane (smooth joints)
@@ -118,6 +132,12 @@ class DDAScene:
         for normal, point in sp.get("fixed_below", ()):
             fixed |= (c - point) @ normal < 0
         return fixed
+
+    def sphere_loads(self, centers):
+        """(force (n, 3) [N], prescribed (n,) bool, velocity (n, 3) [m/s]) of the [[spheres.load]] tables for
+        spheres at `centers`: the summed constant force of the force loads whose region holds a sphere, and the
+        prescribed flag and velocity of the velocity loads (zero elsewhere)."""
+        return sphere_load_arrays(self.spheres.get("loads", ()), centers, self.fixed_spheres(centers))
 
     def block_system(self):
         """BlockSystem of the scene's blocks (materials, body and point loads)."""
@@ -145,6 +165,107 @@ class DDAScene:
         sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
                          local_damping=self.local_damping, pair_laws=self.pair_laws, **self.sleep)
         return bs, sim
+
+
+class SphereLoadError(ValueError):
+    """A [[spheres.load]] table that does not fit the model: ``key``, ``value`` and the message."""
+
+    def __init__(self, key, value, message):
+        super().__init__(message)
+        self.key, self.value = key, value
+
+
+def load_region(load, centers):
+    """Mask of the spheres at `centers` inside the region of one parsed [[spheres.load]] table."""
+    c = np.asarray(centers, float).reshape(-1, 3)
+    kind, spec = load["region"]
+    if kind == "below":
+        normal, point = spec
+        return (c - point) @ normal < 0
+    mask = np.ones(len(c), bool)
+    for axis, sign, value in spec:
+        mask &= sign * (c[:, axis] - value) > 0
+    return mask
+
+
+def sphere_load_arrays(loads, centers, fixed):
+    """(force, prescribed, velocity) of parsed [[spheres.load]] tables on the spheres at `centers` (see
+    DDAScene.sphere_loads). SphereLoadError for a region without a sphere, a fixed sphere in a loaded region,
+    or a sphere under a velocity load and another load."""
+    c = np.asarray(centers, float).reshape(-1, 3)
+    n = len(c)
+    fixed = np.asarray(fixed, bool)
+    force = np.zeros((n, 3))
+    velocity = np.zeros((n, 3))
+    by = np.full(n, -1, np.int64)  # the first load of each sphere
+    prescribed = np.zeros(n, bool)
+    for k, load in enumerate(loads):
+        key, shown = load["key"], load["shown"]
+        mask = load_region(load, c)
+        where = f"{key}.{load['where']}"
+        if not mask.any():
+            raise SphereLoadError(where, shown, "no sphere in region")
+        if (mask & fixed).any():
+            raise SphereLoadError(where, shown, f"{int((mask & fixed).sum())} of its {int(mask.sum())} spheres are "
+                                  "fixed ([spheres] fixed / fixed_below): a sphere cannot be both fixed and loaded")
+        clash = mask & (prescribed if load["kind"] == "force" else (by >= 0))
+        if clash.any():
+            other = loads[int(by[np.flatnonzero(clash)[0]])]["key"]
+            raise SphereLoadError(where, shown, f"{int(clash.sum())} of its spheres are also loaded by {other}: a "
+                                  "sphere with a prescribed velocity takes no other load")
+        by[mask & (by < 0)] = k
+        if load["kind"] == "force":
+            force[mask] += load["value"]
+        else:
+            prescribed |= mask
+            velocity[mask] = load["value"]
+    return force, prescribed, velocity
+
+
+def _read_sphere_loads(rd, raw, centers, fixed):
+    """[[spheres.load]] tables: parsed, and checked on the model's spheres."""
+    from sgim.scene import parse_cut
+
+    if not isinstance(raw, list) or any(not isinstance(t, dict) for t in raw):
+        rd.err("spheres.load", raw, "must be an array of tables ([[spheres.load]])")
+    loads = []
+    for k, lt in enumerate(raw):
+        key = f"spheres.load[{k}]"
+        rd.known(lt, SPHERE_LOAD_KEYS, key)
+        where = [w for w in ("region", "below") if w in lt]
+        if len(where) != 1:
+            rd.err(key, sorted(lt), 'give exactly one of: region = "z>2.6", below = [dip, dip_direction, x, y, z]')
+        what = [w for w in ("force", "velocity") if w in lt]
+        if len(what) != 1:
+            rd.err(key, sorted(lt), "give exactly one of: force = [fx, fy, fz] (N on each sphere), "
+                                    "velocity = [vx, vy, vz] (m/s, prescribed)")
+        if where[0] == "region":
+            v = lt["region"]
+            exprs = [v] if isinstance(v, str) else v
+            if not isinstance(exprs, list) or not exprs:
+                rd.err(f"{key}.region", v, 'must be a string like "z>2.6" or a list of them (all must hold)')
+            cuts = []
+            for e in exprs:
+                try:
+                    cuts.append(parse_cut(e))
+                except ValueError as exc:
+                    rd.err(f"{key}.region", e, str(exc))
+            region = ("region", cuts)
+        else:
+            from sgim.geometry import dip_to_normal
+
+            row = rd.vector(lt, "below", f"{key}.below", n=5)
+            if not (0.0 <= row[0] <= 90.0 and -360.0 <= row[1] <= 360.0):
+                rd.err(f"{key}.below", row.tolist(), "dip must be 0..90 and dip direction -360..360 deg")
+            region = ("below", (np.asarray(dip_to_normal(row[0], row[1]), float), np.asarray(row[2:5], float)))
+        vec = rd.vector(lt, what[0], f"{key}.{what[0]}")
+        loads.append({"key": key, "kind": what[0], "value": vec, "region": region, "where": where[0],
+                      "shown": lt[where[0]]})
+    try:
+        sphere_load_arrays(loads, centers, fixed)
+    except SphereLoadError as exc:
+        rd.err(exc.key, exc.value, str(exc))
+    return loads
 
 
 def _read_spheres(rd, data, path):
@@ -176,8 +297,8 @@ def _read_spheres(rd, data, path):
     law = BondLaw(
         young=rd.number(st, "bond_young", "spheres.bond_young", default=1e9, positive=True),
         kn=rd.number(st, "bond_kn", "spheres.bond_kn", positive=True) if "bond_kn" in st else None,
-        ks=rd.number(st, "bond_ks", "spheres.bond_ks", positive=True) if "bond_ks" in st else None,
-        shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio", default=0.4, positive=True),
+        ks=rd.number(st, "bond_ks", "spheres.bond_ks", nonneg=True) if "bond_ks" in st else None,
+        shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio", default=0.4, nonneg=True),
         tensile=rd.number(st, "bond_tensile", "spheres.bond_tensile", default=inf, nonneg=True),
         shear=rd.number(st, "bond_shear", "spheres.bond_shear", default=inf, nonneg=True),
         damping=rd.number(st, "bond_damping", "spheres.bond_damping", default=0.0, nonneg=True, hi=1.0),
@@ -210,6 +331,14 @@ def _read_spheres(rd, data, path):
            "smooth_joints": rd.boolean(st, "smooth_joints", "spheres.smooth_joints", True)}
     if "joint_friction" in st:
         out["joint_friction"] = rd.number(st, "joint_friction", "spheres.joint_friction", lo=0.0, hi=89.9)
+    if "load" in st:
+        c = np.asarray(model.centers, float).reshape(-1, 3)
+        fixed = np.zeros(len(c), bool)
+        for axis, sign, value in regions:
+            fixed |= sign * (c[:, axis] - value) > 0
+        for normal, point in below:
+            fixed |= (c - point) @ normal < 0
+        out["loads"] = _read_sphere_loads(rd, st["load"], c, fixed)
     return out
 
 
@@ -452,4 +581,5 @@ def _read_block(rd, bt, key, scene_path):
     return spec
 
 
-__all__ = ["DDAScene", "Material", "SceneError", "load_scene", "scene_from_dict", "OUTPUT_FORMATS"]
+__all__ = ["DDAScene", "Material", "SceneError", "load_scene", "scene_from_dict", "OUTPUT_FORMATS", "SphereLoadError",
+           "load_region", "sphere_load_arrays"]
