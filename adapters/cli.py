@@ -45,7 +45,7 @@ def cmd_run(args):
     else:
         res = run(args.deck, out=args.output, np=args.np, timeout=args.timeout, progress=say)
     summary = {"engine": res.engine, "status": res.status, "steps": res.steps, "wall_s": round(res.wall_s, 3),
-               "spheres": res.n, "bonds_intact": int(res.bond_intact.sum()), "bonds": int(len(res.bond_intact)),
+               "bodies": res.n, "bonds_intact": int(res.bond_intact.sum()), "bonds": int(len(res.bond_intact)),
                "particle_steps_per_s": round(res.n * res.steps / res.wall_s) if res.wall_s > 0 else None}
     print(json.dumps(summary) if args.json else
           "  ".join(f"{k} {v}" for k, v in summary.items()))

@@ -177,7 +177,7 @@ def export(source, to, out, variant=None, overrides=None, progress=None):
 
 
 def overrides_for_blocks(overrides):
-    return {k: v for k, v in (overrides or {}).items() if k in ("duration", "dt") and v is not None}
+    return {k: v for k, v in (overrides or {}).items() if k in ("duration", "dt", "record_every") and v is not None}
 
 
 def write_vtu(run: SphereRun, folder):
