@@ -7,9 +7,18 @@ three spheres, two spheres and a plane, or one sphere and two planes.  Planes ar
 walls of the domain box and the tangent planes of the constraint surfaces (excavation
 surfaces, cavities, the fill shape) at the foot of the closest point.  After each sphere is
 placed, every pocket it forms with its neighbours is computed in closed form, checked, and
-pushed on a heap keyed by its height z.  The lowest pocket is popped, checked again against
-the spheres placed since it was made, and filled.  Seeds (sphere positions on the floor of
-the region) start the process; it ends when no pocket is left.
+queued by its height z.  The lowest pocket is taken and filled.  Seeds (sphere positions on
+the floor of the region) start the process; it ends when no pocket is left.
+
+The queue is a bucket queue: buckets QRES x the smallest grid level's largest radius high,
+each a list taken newest first (the pockets made by the last spheres placed, which are still
+in the cache; within a bucket the order is not by height).  A queued pocket is removed as soon as a new sphere covers
+it: the pocket touches the sphere that made it, so a sphere that covers it lies within
+r + r_maker + 2 r_pocket of its maker, a neighbour the new sphere gathers anyway; each sphere
+keeps the list of its queued pockets.  For a constant radius this is complete and a pocket
+taken from the queue needs no further check; with a radius law or a grading the pocket may be
+filled by another radius than it was made for, and it is checked again against the spheres
+placed since it was made.
 
 Every placed sphere touches its supports exactly (up to rounding), so the overlap is zero up
 to the stated tolerance and spheres touch the walls and surfaces they rest on.
@@ -148,46 +157,58 @@ def pocket_spp(ax, ay, az, da, n1x, n1y, n1z, h1, n2x, n2y, n2z, h2, out):
 
 
 # ---------------------------------------------------------------------------
-# binary heap (keys float64, values int64)
+# bucket queue of candidates (the packer's priority queue)
+#
+# Buckets of height QRES x the smallest level's largest radius hold doubly linked lists of
+# candidates (newest first); bmin never exceeds the lowest non-empty bucket.  Every candidate
+# made by a placed sphere is also on its creator's list, so that the candidates a new sphere
+# covers are removed when it is placed (its neighbours' lists) instead of being popped stale.
 
-@njit(cache=True, error_model="numpy")
-def heap_push(hkv, n, key, val):
-    """Binary heap in one (cap, 2) array: key, value (an index, exact as a float) side by side."""
-    i = n
-    while i > 0:
-        p = (i - 1) >> 1
-        if hkv[p, 0] <= key:
-            break
-        hkv[i, 0] = hkv[p, 0]
-        hkv[i, 1] = hkv[p, 1]
-        i = p
-    hkv[i, 0] = key
-    hkv[i, 1] = val
-    return n + 1
+QRES = 0.1
 
 
-@njit(cache=True, error_model="numpy")
-def heap_pop(hkv, n):
-    v = int(hkv[0, 1])
-    n -= 1
-    key = hkv[n, 0]
-    val = hkv[n, 1]
-    i = 0
-    while True:
-        lft = 2 * i + 1
-        if lft >= n:
-            break
-        m = lft
-        if lft + 1 < n and hkv[lft + 1, 0] < hkv[lft, 0]:
-            m = lft + 1
-        if hkv[m, 0] >= key:
-            break
-        hkv[i, 0] = hkv[m, 0]
-        hkv[i, 1] = hkv[m, 1]
-        i = m
-    hkv[i, 0] = key
-    hkv[i, 1] = val
-    return v, n
+@njit(cache=True, inline="always")
+def q_bucket(key, qz0, qinv, nbk):
+    return min(max(int((key - qz0) * qinv), 0), nbk - 1)
+
+
+@njit(cache=True, inline="always")
+def q_push(bhead, CI, ohead, c, b, owner):
+    """Queue candidate c in bucket b and on its creator's list (owner < 0: none).
+    CI[c]: 4 bucket, 5 next, 6 previous in the bucket; 7 next, 8 previous on the creator's list."""
+    h = bhead[b]
+    CI[c, 4] = b
+    CI[c, 5] = h
+    CI[c, 6] = -1
+    if h >= 0:
+        CI[h, 6] = c
+    bhead[b] = c
+    if owner >= 0:
+        h = ohead[owner]
+        CI[c, 7] = h
+        CI[c, 8] = -1
+        if h >= 0:
+            CI[h, 8] = c
+        ohead[owner] = c
+
+
+@njit(cache=True, inline="always")
+def q_remove(bhead, CI, ohead, c, owner):
+    p, q = CI[c, 6], CI[c, 5]
+    if p >= 0:
+        CI[p, 5] = q
+    else:
+        bhead[CI[c, 4]] = q
+    if q >= 0:
+        CI[q, 6] = p
+    if owner >= 0:
+        p, q = CI[c, 8], CI[c, 7]
+        if p >= 0:
+            CI[p, 7] = q
+        else:
+            ohead[owner] = q
+        if q >= 0:
+            CI[q, 8] = p
 
 
 # ---------------------------------------------------------------------------
@@ -260,14 +281,14 @@ def grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR,
                             continue
                         j = head[base + ix]
                         while j >= 0:
-                            if j != skip:
-                                dx = XR[j, 0] - px
-                                dy = XR[j, 1] - py
-                                dz = XR[j, 2] - pz
-                                lim = reach + XR[j, 3]
-                                if dx * dx + dy * dy + dz * dz < lim * lim and m < cap:
-                                    out[m] = j
-                                    m += 1
+                            # appended without a branch (out has room for one more than cap - 1)
+                            dx = XR[j, 0] - px
+                            dy = XR[j, 1] - py
+                            dz = XR[j, 2] - pz
+                            lim = reach + XR[j, 3]
+                            out[m] = j
+                            m += (dx * dx + dy * dy + dz * dz < lim * lim) & (j != skip)
+                            m = min(m, cap - 1)
                             j = nxt[j]
             continue
         for bz in range(z0 // BLOCK, z1 // BLOCK + 1):
@@ -473,6 +494,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
     dcen, dnrm, drad, dhalf = discs
     has_mesh = Dc[12].shape[0] > 0
     check_region = has_mesh or gnx > 0
+    tiny_tol = tol < 1e-9
 
     cap = max(cap0, X0.shape[0] + 16)
     X = np.empty((cap, 3))
@@ -513,16 +535,23 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
 
     # candidates
     ccap = max(1024, 4 * seeds.shape[0] + 4096)
-    cpos = np.empty((ccap, 3))
-    crad = np.empty(ccap)
-    cstamp = np.empty(ccap, np.int64)
-    csup = np.empty((ccap, 3), np.int64)
+    # a candidate in two rows: CF position and radius; CI supports (3), the number of spheres
+    # when it was made, and its queue links (bucket, next, previous; creator's list next, previous)
+    CF = np.empty((ccap, 4))
+    CI = np.empty((ccap, 16), np.int32)
     cpl = np.empty((ccap, 8))
     freel = np.empty(ccap, np.int64)
     nfree = 0
     ncand = 0
-    hkv = np.empty((ccap, 2))  # the heap: height, candidate
-    hn = 0
+    # the queue (see q_push): bucket of each candidate, links in its bucket and on its creator's list
+    ohead = np.full(cap, -1, np.int32)  # each sphere's newest queued candidate
+    qz0 = lo[2] - 4.0 * rmax[-1]
+    qspan = hi[2] - qz0 + 4.0 * rmax[-1]
+    nbk = min(int(qspan / (QRES * rmax[0])) + 2, 1 << 22)
+    qinv = (nbk - 2) / qspan
+    bhead = np.full(nbk, -1, np.int64)
+    bmin = nbk - 1
+    hn = 0  # queued candidates
 
     # pool of radii (mode 1), sorted descending
     pool = np.empty(max(pool_size, 1))
@@ -544,8 +573,16 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
     nb = np.empty(nbcap, np.int64)
     nbx = np.empty((nbcap, 3))
     nbr = np.empty(nbcap)
-    nbd = np.empty(nbcap)
     nbh = np.empty(nbcap, np.int64)
+    nU = np.empty(nbcap)  # per neighbour, for the (S, A, B) pockets (see there)
+    nV = np.empty(nbcap)
+    nW = np.empty(nbcap)
+    nUU = np.empty(nbcap)
+    nKU = np.empty(nbcap)
+    nL2 = np.empty(nbcap)
+    BV = np.empty((5, nbcap))
+    SQ = np.empty((7, nbcap))
+    pb = np.empty(nbcap, np.int64)
     out = np.empty((2, 3))
     out2 = np.empty((2, 3))
     pl = np.empty((6 + 64 + 256, 4))  # planes near the new sphere: nx ny nz h (kept side: n.x >= h)
@@ -559,43 +596,50 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             break
         c = ncand
         ncand += 1
-        cpos[c] = seeds[s]
-        crad[c] = seed_r[s]
-        cstamp[c] = 0
-        csup[c, 0] = SUP_NONE
-        csup[c, 1] = SUP_NONE
-        csup[c, 2] = SUP_NONE
+        CF[c, 0], CF[c, 1], CF[c, 2] = seeds[s, 0], seeds[s, 1], seeds[s, 2]
+        CF[c, 3] = seed_r[s]
+        CI[c, 3] = 0
+        CI[c, 0] = SUP_NONE
+        CI[c, 1] = SUP_NONE
+        CI[c, 2] = SUP_NONE
         # seeds go by the height of the floor under them (not of their centre: no sifting by
         # radius) and before the pockets at the same height
-        hn = heap_push(hkv, hn, seeds[s, 2] - seed_r[s] - 1e-9 * (abs(seeds[s, 2]) + seed_r[s]), c)
+        b = q_bucket(seeds[s, 2] - seed_r[s] - 1e-9 * (abs(seeds[s, 2]) + seed_r[s]), qz0, qinv, nbk)
+        q_push(bhead, CI, ohead, c, b, -1)
+        bmin = min(bmin, b)
+        hn += 1
 
     while hn > 0:
-        c, hn = heap_pop(hkv, hn)
+        while bhead[bmin] < 0:
+            bmin += 1
+        c = bhead[bmin]
+        q_remove(bhead, CI, ohead, c, CI[c, 0])
+        hn -= 1
         freel[nfree] = c
         nfree += 1
         cnt[0] += 1
-        r0 = crad[c]
+        r0 = CF[c, 3]
         px, py, pz = 0.0, 0.0, 0.0
         placed = False
         rr = r0
         # --- choose the radius and the exact position ---------------------------------
-        seed = csup[c, 0] == SUP_NONE
+        seed = CI[c, 0] == SUP_NONE
         if mode != 0 and not seed:
             # a pocket that the spheres placed since it was made fill for its own radius is gone
             # for the others too (most pops end here, without trying other radii)
-            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, cpos[c, 0], cpos[c, 1],
-                             cpos[c, 2], r0, tol, cstamp[c]):
+            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, CF[c, 0], CF[c, 1],
+                             CF[c, 2], r0, tol, CI[c, 3]):
                 cnt[3] += 1
                 continue
         ntry = npool if (mode == 1 and not seed) else 1
         for t in range(ntry):
-            px, py, pz = cpos[c, 0], cpos[c, 1], cpos[c, 2]
+            px, py, pz = CF[c, 0], CF[c, 1], CF[c, 2]
             if mode == 0 or seed:
                 rr = r0  # seeds keep the radius they were made with
             elif mode == 1:
                 rr = pool[t]
                 if rr != r0:
-                    if not _reposition(csup, cpl, c, X, R, lo, hi, rr, cpos, out):
+                    if not _reposition(CI, cpl, c, X, R, lo, hi, rr, CF, out):
                         continue
                     px, py, pz = out[0, 0], out[0, 1], out[0, 2]
             else:
@@ -603,7 +647,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                 rr = r0
                 ok = True
                 # the distance is 1-Lipschitz: from the creating sphere's bounds, |P - S| <= R_S + rmax
-                sS = csup[c, 0]
+                sS = CI[c, 0]
                 dlo, dhi = -1.0, BIG
                 if sS >= 0:
                     dlo = DGL[sS] - (R[sS] + rc * (1.0 + spread))
@@ -612,7 +656,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     rnew = (rc if dlo >= dcg else rf) * fac
                     if rnew != rr:
                         rr = rnew
-                        if not _reposition(csup, cpl, c, X, R, lo, hi, rr, cpos, out):
+                        if not _reposition(CI, cpl, c, X, R, lo, hi, rr, CF, out):
                             break
                         px, py, pz = out[0, 0], out[0, 1], out[0, 2]
                     pdl, pdh = max(dlo, 0.0), dhi
@@ -628,21 +672,23 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                             conv = True
                             break
                         rr = rnew if it < 10 else rr + 0.5 * (rnew - rr)
-                        if not _reposition(csup, cpl, c, X, R, lo, hi, rr, cpos, out):
+                        if not _reposition(CI, cpl, c, X, R, lo, hi, rr, CF, out):
                             break
                         px, py, pz = out[0, 0], out[0, 1], out[0, 2]
                     if not conv:
                         break
             moved = rr != r0
-            if moved or csup[c, 0] == SUP_NONE:
+            if moved or CI[c, 0] == SUP_NONE:
                 if not in_box(lo, hi, px, py, pz, rr, tol):
                     continue
                 if check_region and not _region_ok(px, py, pz, rr, tol, has_mesh, Dc, ec, cstart, cfac, g0x, g0y,
                                                    gs, gnx, gny):
                     continue
-            stamp = 0 if moved else cstamp[c]
-            if grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, px, py, pz, rr,
-                             tol, stamp):
+            stamp = 0 if moved else CI[c, 3]
+            # a constant-radius pocket still queued is clear: the spheres placed since it was made
+            # removed it if they covered it (see the covering step below)
+            if not (mode == 0 and not seed) and grid_overlaps(org, cs, dims, coff, rmax, bdims, boff, head, nxt,
+                                                              bcnt, XR, px, py, pz, rr, tol, stamp):
                 continue
             placed = True
             if mode == 1 and not seed:
@@ -673,6 +719,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             nxt = _grow1(nxt, cap, -1)
             FP = _grow2(FP, cap)
             FPk = _grow1(FPk, cap, -1)
+            ohead = _grow1(ohead, cap, -1)
         i = n
         n += 1
         X[i, 0], X[i, 1], X[i, 2] = px, py, pz
@@ -690,7 +737,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
         if cnt[1] % 50000 == 0:
             with objmode():
                 progress_hook(n, hn)
-        if csup[c, 0] == SUP_NONE:
+        if CI[c, 0] == SUP_NONE:
             cnt[4] += 1
 
         # --- new pockets ---------------------------------------------------------
@@ -704,20 +751,38 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             rn = grade_radius(DGL[i], rf, rc, df, dcg) * (1.0 - spread)
         m = grid_gather(org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, XR, px, py, pz,
                         rr + 2.0 * rn, nb, nbcap, i)
-        # nearest first: the closest neighbours exclude the most pocket directions
+        # remove the queued pockets the new sphere covers.  A pocket Q of radius rq made by sphere
+        # j touches it (|Q - x_j| = r_j + rq); covered, |Q - P| < rr + rq, so |P - x_j| < rr + r_j + 2 rq:
+        # j is among the neighbours gathered when rq <= rn (always for a constant radius)
+        for a in range(m):
+            c2 = ohead[nb[a]]
+            while c2 >= 0:
+                c3 = CI[c2, 7]
+                rq = CF[c2, 3]
+                dx = CF[c2, 0] - px
+                dy = CF[c2, 1] - py
+                dz = CF[c2, 2] - pz
+                lim = rq + rr - tol * min(rq, rr)
+                if dx * dx + dy * dy + dz * dz < lim * lim:
+                    q_remove(bhead, CI, ohead, c2, nb[a])
+                    hn -= 1
+                    freel[nfree] = c2
+                    nfree += 1
+                    cnt[7] += 1
+                c2 = c3
+        # the nearest neighbour first: it excludes the most pocket directions (tried before the others)
+        best = BIG
+        ab = 0
         for a in range(m):
             j = nb[a]
-            nbd[a] = (XR[j, 0] - px) ** 2 + (XR[j, 1] - py) ** 2 + (XR[j, 2] - pz) ** 2 - (XR[j, 3] + rr) ** 2
-        for a in range(1, m):
-            j = nb[a]
-            dj = nbd[a]
-            q = a
-            while q > 0 and nbd[q - 1] > dj:
-                nbd[q] = nbd[q - 1]
-                nb[q] = nb[q - 1]
-                q -= 1
-            nbd[q] = dj
-            nb[q] = j
+            dj = (XR[j, 0] - px) ** 2 + (XR[j, 1] - py) ** 2 + (XR[j, 2] - pz) ** 2 - (XR[j, 3] + rr) ** 2
+            if dj < best:
+                best = dj
+                ab = a
+        if m > 0:
+            j = nb[ab]
+            nb[ab] = nb[0]
+            nb[0] = j
         for a in range(m):
             j = nb[a]
             nbx[a, 0], nbx[a, 1], nbx[a, 2] = XR[j, 0], XR[j, 1], XR[j, 2]
@@ -782,30 +847,94 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
 
         # (S, A, B)
         zcut = pz - DEEP * (rr + rn)
+        # per neighbour (structure of arrays): position relative to S, |.|^2, the term of the
+        # pocket solve that depends on one neighbour only, the squared clearance limit for rn
+        ds = rr + rn
+        ds2 = ds * ds
+        for a in range(m):
+            ua, va, wa = nbx[a, 0] - px, nbx[a, 1] - py, nbx[a, 2] - pz
+            nU[a], nV[a], nW[a] = ua, va, wa
+            uua = ua * ua + va * va + wa * wa
+            nUU[a] = uua
+            dba = nbr[a] + rn
+            nKU[a] = 0.5 * (ds2 + uua - dba * dba)
+            lm = rn + nbr[a] - tol * min(rn, nbr[a])
+            nL2[a] = lm * lm
+        # the box shrunk by rn (allowance tol rn), relative to S
+        bxlo, bxhi = lo[0] + rn - tol * rn - px, hi[0] - rn + tol * rn - px
+        bylo, byhi = lo[1] + rn - tol * rn - py, hi[1] - rn + tol * rn - py
+        bzlo, bzhi = lo[2] + rn - tol * rn - pz, hi[2] - rn + tol * rn - pz
         # neighbours above zcut, in order: a neighbour below it pairs only with these
         nhigh = 0
         for a in range(m):
-            if nbx[a, 2] >= zcut:
-                nbh[nhigh] = a
-                nhigh += 1
+            nbh[nhigh] = a
+            nhigh += nW[a] + pz >= zcut
         hp = 0  # nbh[hp:] are the neighbours above zcut with an index > a
         for a in range(m):
             while hp < nhigh and nbh[hp] <= a:
                 hp += 1
-            ax_, ay_, az_, ra = nbx[a, 0], nbx[a, 1], nbx[a, 2], nbr[a]
-            alow = az_ < zcut
+            ra = nbr[a]
+            ux, uy, uz, uu, ku = nU[a], nV[a], nW[a], nUU[a], nKU[a]
+            alow = uz + pz < zcut
             nbt = (nhigh - hp) if alow else (m - a - 1)
+            # partners B within reach of A, their terms copied side by side (no branch)
+            npb = 0
             for t in range(nbt):
                 b = nbh[hp + t] if alow else a + 1 + t
-                bx_, by_, bz_, rb = nbx[b, 0], nbx[b, 1], nbx[b, 2], nbr[b]
-                lim = ra + rb + 2.0 * rn
-                if (ax_ - bx_) ** 2 + (ay_ - by_) ** 2 + (az_ - bz_) ** 2 >= lim * lim:
+                lim = ra + nbr[b] + 2.0 * rn
+                BV[0, npb], BV[1, npb], BV[2, npb], BV[3, npb], BV[4, npb] = nU[b], nV[b], nW[b], nUU[b], nKU[b]
+                pb[npb] = b
+                npb += (ux - nU[b]) ** 2 + (uy - nV[b]) ** 2 + (uz - nW[b]) ** 2 < lim * lim
+            # the pockets |Q| = ds, |Q - A| = ra + rn, |Q - B| = rb + rn (Q relative to S):
+            # Q = al A + be B +- g (A x B); none where g2 < 0 or A, B are aligned with S
+            for t in range(npb):
+                vx, vy, vz, vv, kv = BV[0, t], BV[1, t], BV[2, t], BV[3, t], BV[4, t]
+                uv = ux * vx + uy * vy + uz * vz
+                nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+                det = nx * nx + ny * ny + nz * nz
+                idet = 1.0 / max(det, 1e-300)
+                al = (ku * vv - kv * uv) * idet
+                be = (kv * uu - ku * uv) * idet
+                g2 = (ds2 - al * ku - be * kv) * idet
+                gg = math.sqrt(max(g2, 0.0))
+                g = gg if ((det > 1e-12 * uu * vv) & (g2 >= 0.0)) else -1.0
+                SQ[0, t] = al * ux + be * vx
+                SQ[1, t] = al * uy + be * vy
+                SQ[2, t] = al * uz + be * vz
+                SQ[3, t] = g * nx
+                SQ[4, t] = g * ny
+                SQ[5, t] = g * nz
+                SQ[6, t] = g
+            for t in range(npb):
+                if SQ[6, t] < 0.0:
                     continue
-                k2 = pocket_sss(px, py, pz, rr + rn, ax_, ay_, az_, ra + rn, bx_, by_, bz_, rb + rn, out)
-                for q in range(k2):
-                    qx, qy, qz = out[q, 0], out[q, 1], out[q, 2]
-                    if not (in_box(lo, hi, qx, qy, qz, rn, tol) and _clear_of(qx, qy, qz, rn, tol, nbx, nbr, m, a, b)):
+                b = pb[t]
+                for q in range(2):
+                    if q == 0:
+                        qx, qy, qz = SQ[0, t] + SQ[3, t], SQ[1, t] + SQ[4, t], SQ[2, t] + SQ[5, t]
+                    else:
+                        qx, qy, qz = SQ[0, t] - SQ[3, t], SQ[1, t] - SQ[4, t], SQ[2, t] - SQ[5, t]
+                    if not (bxlo <= qx <= bxhi and bylo <= qy <= byhi and bzlo <= qz <= bzhi):
                         continue
+                    # clear of every neighbour: the nearest first, then all of them without a branch
+                    # (A and B touch Q, tol min(r) beyond the limit: they never count unless tol is
+                    # near the rounding error, where they are left out by name)
+                    if not tiny_tol and (nU[0] - qx) ** 2 + (nV[0] - qy) ** 2 + (nW[0] - qz) ** 2 < nL2[0]:
+                        continue
+                    nblk = 0
+                    for e in range(m):
+                        dx = nU[e] - qx
+                        dy = nV[e] - qy
+                        dz = nW[e] - qz
+                        nblk += dx * dx + dy * dy + dz * dz < nL2[e]
+                    if nblk > 0 and tiny_tol:
+                        nblk = 0
+                        for e in range(m):
+                            if e != a and e != b and (nU[e] - qx) ** 2 + (nV[e] - qy) ** 2 + (nW[e] - qz) ** 2 < nL2[e]:
+                                nblk += 1
+                    if nblk > 0:
+                        continue
+                    qx, qy, qz = qx + px, qy + py, qz + pz
                     if check_region and not _region_ok(qx, qy, qz, rn, tol, has_mesh, Dc, ec, cstart, cfac, g0x,
                                                        g0y, gs, gnx, gny):
                         continue
@@ -815,20 +944,20 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     else:
                         if ncand == ccap:
                             ccap = ccap * 2
-                            cpos = _grow2(cpos, ccap)
-                            crad = _grow1(crad, ccap, 0.0)
-                            cstamp = _grow1(cstamp, ccap, 0)
-                            csup = _grow2(csup, ccap)
+                            CF = _grow2(CF, ccap)
+                            CI = _grow2(CI, ccap)
                             cpl = _grow2(cpl, ccap)
                             freel = _grow1(freel, ccap, 0)
-                            hkv = _grow2(hkv, ccap)
                         cc = ncand
                         ncand += 1
-                    cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
-                    crad[cc] = rn
-                    cstamp[cc] = n
-                    csup[cc, 0], csup[cc, 1], csup[cc, 2] = i, nb[a], nb[b]
-                    hn = heap_push(hkv, hn, qz, cc)
+                    CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
+                    CF[cc, 3] = rn
+                    CI[cc, 3] = n
+                    CI[cc, 0], CI[cc, 1], CI[cc, 2] = i, nb[a], nb[b]
+                    bq = q_bucket(qz, qz0, qinv, nbk)
+                    q_push(bhead, CI, ohead, cc, bq, i)
+                    bmin = min(bmin, bq)
+                    hn += 1
                     cnt[2] += 1
         # (S, A, plane) and (S, plane, plane)
         for p in range(npl):
@@ -863,23 +992,23 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     else:
                         if ncand == ccap:
                             ccap = ccap * 2
-                            cpos = _grow2(cpos, ccap)
-                            crad = _grow1(crad, ccap, 0.0)
-                            cstamp = _grow1(cstamp, ccap, 0)
-                            csup = _grow2(csup, ccap)
+                            CF = _grow2(CF, ccap)
+                            CI = _grow2(CI, ccap)
                             cpl = _grow2(cpl, ccap)
                             freel = _grow1(freel, ccap, 0)
-                            hkv = _grow2(hkv, ccap)
                         cc = ncand
                         ncand += 1
-                    cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
-                    crad[cc] = rn
-                    cstamp[cc] = n
-                    csup[cc, 0], csup[cc, 1] = i, nb[a]
-                    csup[cc, 2] = plid[p]
+                    CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
+                    CF[cc, 3] = rn
+                    CI[cc, 3] = n
+                    CI[cc, 0], CI[cc, 1] = i, nb[a]
+                    CI[cc, 2] = plid[p]
                     if plid[p] == SUP_PLANE0:
                         cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
-                    hn = heap_push(hkv, hn, qz, cc)
+                    bq = q_bucket(qz, qz0, qinv, nbk)
+                    q_push(bhead, CI, ohead, cc, bq, i)
+                    bmin = min(bmin, bq)
+                    hn += 1
                     cnt[2] += 1
             for p2 in range(p + 1, npl):
                 if (plid[p] == SUP_PLANE0 and plid[p2] == SUP_PLANE0) or plown[p] >= 0 or plown[p2] >= 0:
@@ -911,26 +1040,26 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     else:
                         if ncand == ccap:
                             ccap = ccap * 2
-                            cpos = _grow2(cpos, ccap)
-                            crad = _grow1(crad, ccap, 0.0)
-                            cstamp = _grow1(cstamp, ccap, 0)
-                            csup = _grow2(csup, ccap)
+                            CF = _grow2(CF, ccap)
+                            CI = _grow2(CI, ccap)
                             cpl = _grow2(cpl, ccap)
                             freel = _grow1(freel, ccap, 0)
-                            hkv = _grow2(hkv, ccap)
                         cc = ncand
                         ncand += 1
-                    cpos[cc, 0], cpos[cc, 1], cpos[cc, 2] = qx, qy, qz
-                    crad[cc] = rn
-                    cstamp[cc] = n
+                    CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
+                    CF[cc, 3] = rn
+                    CI[cc, 3] = n
                     # a wall first, then the other support (a wall or the stored plane)
                     w1, w2 = plid[p], plid[p2]
                     if w1 == SUP_PLANE0:
                         w1, w2 = w2, w1
-                    csup[cc, 0], csup[cc, 1], csup[cc, 2] = i, w1, w2
+                    CI[cc, 0], CI[cc, 1], CI[cc, 2] = i, w1, w2
                     if w2 == SUP_PLANE0:
                         cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
-                    hn = heap_push(hkv, hn, qz, cc)
+                    bq = q_bucket(qz, qz0, qinv, nbk)
+                    q_push(bhead, CI, ohead, cc, bq, i)
+                    bmin = min(bmin, bq)
+                    hn += 1
                     cnt[2] += 1
     cnt[5] = n_initial
     cnt[6] = npool

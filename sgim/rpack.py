@@ -27,8 +27,10 @@ above the surface in vertical projection and the sphere does not reach it), minu
 ``[[cavity]]``, intersected with the fill shape.
 
 Algorithm: pocket filling, lowest pocket first (sgim/_rpack.py).  Spheres are placed one at a
-time, each in the lowest *pocket* where it touches three supports (spheres, box walls, the
-tangent planes of the surfaces), starting from seeds on the floor of the region.  It is a
+time, each in the lowest *pocket* (to within the queue's bucket height: 10 % of the radius, of
+the smallest grid level's largest radius for unequal spheres) where it touches three supports
+(spheres, box walls, the tangent planes of the surfaces), starting from seeds on the floor of
+the region.  It is a
 geometric analogue of deposition: no overlaps beyond rounding, every sphere rests on three
 supports, spheres rest on the floor, walls and surfaces (the packing reaches every face within
 one radius; the last layer under a ceiling need not touch it), and the work follows the spheres
@@ -599,7 +601,8 @@ def pack_region(region, spec, near=None, progress=None, cap=None, extra_seeds=No
     K.PROGRESS[0] = None
     t_pack = time.perf_counter() - t0 - t_seed
     counters = {"pockets_pushed": int(cnt[2]), "pops": int(cnt[0]), "pop_rejects": int(cnt[3]),
-                "seeds_placed": int(cnt[4]), "seeds": int(len(seeds))}
+                "seeds_placed": int(cnt[4]), "seeds": int(len(seeds)),
+                "pockets_covered": int(cnt[7])}
     if mode == 1:
         counters["radii_left_in_pool"] = int(cnt[6])
     res = PackResult(X, R, {"counters": counters}, {"seeds": t_seed, "pack": t_pack})

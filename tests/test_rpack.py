@@ -106,6 +106,16 @@ def test_same_seed_same_packing_and_other_seed_differs():
     assert len(X3) != len(X1) or not np.allclose(X3, X1)
 
 
+def test_tolerance_near_rounding_keeps_pockets():
+    """An overlap tolerance near the rounding error (1e-12): no overlap beyond it (brute force), and
+    the pockets that touch their supports exactly are still made: about as many spheres as at 1e-6."""
+    reg = Region(np.zeros(3), np.full(3, 10.0))
+    tiny = pack_region(reg, RandomSpec(seed=4, law=CONST, overlap=1e-12))
+    ref = pack_region(reg, RandomSpec(seed=4, law=CONST))
+    assert brute_max_overlap(tiny.centres, tiny.radii) <= 1e-12
+    assert len(tiny.radii) >= 0.97 * len(ref.radii)
+
+
 def test_density_of_a_larger_box_bulk():
     """Bulk density (centres in the inner box) of equal spheres: random close-ish, well above 0.58."""
     reg, X, R = box_pack(30.0, CONST, seed=2)
