@@ -183,10 +183,15 @@ def run_deck(folder, out, np=1, timeout=None, progress=None) -> RunResult:
         if not (folder / need).exists():
             raise EngineError(f"yade: {folder}: not a YADE sphere deck (missing {need})")
     outcome, log = run_script(exe, folder, out, OUTPUTS, np=np, timeout=timeout, progress=progress)
-    res = _result(folder, out, outcome, np)
+    return finish(_result(folder, out, outcome, np), "yade", outcome, log, out)
+
+
+def finish(res, engine, outcome, log, out):
+    """Save the RunResult `res` of a YADE run into `out` and return it; an incomplete one (the engine failed,
+    or its script ended without its final results) is saved and raised as an EngineError."""
     if not res.complete:
-        res.message = describe_failure("yade", outcome, log) if not outcome.ok else \
-            f"yade: the script ended without writing its final results (log {log})"
+        res.message = describe_failure(engine, outcome, log) if not outcome.ok else \
+            f"{engine}: the script ended without writing its final results (log {log})"
         res.save(out)
         raise EngineError(res.message, result=res)
     res.save(out)

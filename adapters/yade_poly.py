@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .process import EngineError, describe_failure, find_engine
+from .process import EngineError, find_engine
 from .result import COMPLETE, INCOMPLETE, RunResult
 
 SCRIPT = Path(__file__).with_name("yade_poly_script.py")
@@ -178,14 +178,9 @@ def run_polyhedra_deck(folder, out, np=1, timeout=None, progress=None) -> RunRes
             raise EngineError(f"yade-polyhedra: {folder}: not a YADE polyhedra deck (missing {need})")
     outcome, log = run_script(exe, folder, out, OUTPUTS, np=np, timeout=timeout, progress=progress,
                               tag="yade-polyhedra")
-    res = _result(folder, out, outcome, np)
-    if not res.complete:
-        res.message = describe_failure("yade-polyhedra", outcome, log) if not outcome.ok else \
-            f"yade-polyhedra: the script ended without writing its final results (log {log})"
-        res.save(out)
-        raise EngineError(res.message, result=res)
-    res.save(out)
-    return res
+    from .yade import finish
+
+    return finish(_result(folder, out, outcome, np), "yade-polyhedra", outcome, log, out)
 
 
 def main(argv=None):

@@ -389,6 +389,20 @@ def _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_in
     return nact
 
 
+@njit(cache=True, inline="always")
+def _list_broken(i, j, fixed, kin, nl_pairs, nl_n, ncap, nl_flag):
+    """A bond that broke: its pair joins the pair list as a contact (unless neither sphere moves; a full list
+    raises the flag, and the caller rebuilds the list)."""
+    if (fixed[i] or kin[i]) and (fixed[j] or kin[j]):
+        return
+    if nl_n[0] < ncap:
+        nl_pairs[nl_n[0], 0] = i
+        nl_pairs[nl_n[0], 1] = j
+        nl_n[0] += 1
+    else:
+        nl_flag[0] = 1
+
+
 @njit(cache=True, fastmath=SAFE_FAST)
 def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
                 x, v, w, r, m, inertia, fixed, kin, bforce, lawrow, wall_lawrow,
@@ -628,14 +642,7 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
                 BB[k, 7] = 0.0
                 BB[k, 8] = 0.0
                 nbroken += 1
-                if (fixed[i] or kin[i]) and (fixed[j] or kin[j]):
-                    continue
-                if nl_n[0] < ncap:
-                    nl_pairs[nl_n[0], 0] = i
-                    nl_pairs[nl_n[0], 1] = j
-                    nl_n[0] += 1
-                else:
-                    nl_flag[0] = 1
+                _list_broken(i, j, fixed, kin, nl_pairs, nl_n, ncap, nl_flag)
                 continue
             nint += 1
             BB[k, 6] = u0
@@ -712,14 +719,7 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
                 cfn[q] = 0.0
                 res[1] += 0.5 * CB[q, 1] * stretch * stretch
                 nbroken += 1
-                if (fixed[i] or kin[i]) and (fixed[j] or kin[j]):
-                    continue
-                if nl_n[0] < ncap:
-                    nl_pairs[nl_n[0], 0] = i
-                    nl_pairs[nl_n[0], 1] = j
-                    nl_n[0] += 1
-                else:
-                    nl_flag[0] = 1
+                _list_broken(i, j, fixed, kin, nl_pairs, nl_n, ncap, nl_flag)
                 continue
             nint += 1
             if last:
