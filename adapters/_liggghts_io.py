@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from .process import ProcessOutcome, error_line, kill_group
+from .process import ProcessOutcome, die_with_parent, error_line, kill_group
 
 DUMP_COLUMNS = ("id", "x", "y", "z", "vx", "vy", "vz", "omegax", "omegay", "omegaz")
 DUMP_FORMAT = " ".join(["%d"] + ["%.17g"] * (len(DUMP_COLUMNS) - 1))
@@ -105,7 +105,8 @@ class Driver:
         self.eof = False
         self.timed_out = False
         self.proc = subprocess.Popen(cmd, cwd=str(cwd), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, env=full_env, start_new_session=True, bufsize=0)
+                                     stderr=subprocess.STDOUT, env=full_env, start_new_session=True, bufsize=0,
+                                     preexec_fn=die_with_parent)
         self.sel = selectors.DefaultSelector()
         self.sel.register(self.proc.stdout, selectors.EVENT_READ)
 

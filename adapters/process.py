@@ -1,6 +1,7 @@
 """Engine subprocesses: found on PATH, run unbuffered with a time limit, their error line surfaced as ours.
 
-``run_process(cmd, cwd, log, timeout)`` runs one engine process in its own process group, copies its merged
+``run_process(cmd, cwd, log, timeout)`` runs one engine process in its own process group (killed by the
+kernel if the caller dies: ``die_with_parent``), copies its merged
 stdout/stderr to ``log`` line by line (and to ``on_line``), kills the whole group when the time limit passes,
 and returns a :class:`ProcessOutcome` (exit status, timed out, wall time, the engine's error line).
 """
@@ -28,6 +29,18 @@ class EngineError(RuntimeError):
     def __init__(self, message, result=None):
         super().__init__(message)
         self.result = result
+
+
+def die_with_parent():
+    """Run in an engine's child process before exec: ask Linux to SIGKILL it when the process that started it
+    dies (PR_SET_PDEATHSIG), so an engine never outlives a killed caller (a study case past its time limit,
+    a killed rank). Elsewhere a no-op."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
 
 
 def find_engine(name):
@@ -77,7 +90,8 @@ def run_process(cmd, cwd, log, timeout=None, on_line=None, env=None):
     full_env.update(env or {})
     with open(log, "w") as fh:
         proc = subprocess.Popen(cmd, cwd=str(cwd), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, env=full_env, start_new_session=True, bufsize=0)
+                                stdin=subprocess.DEVNULL, env=full_env, start_new_session=True, bufsize=0,
+                                preexec_fn=die_with_parent)
         sel = selectors.DefaultSelector()
         sel.register(proc.stdout, selectors.EVENT_READ)
         buf = b""
@@ -140,5 +154,5 @@ def describe_failure(engine, outcome: ProcessOutcome, log):
     return f"{engine}: exit status {outcome.rc}: {msg or 'no output'} (log {log})"
 
 
-__all__ = ["EngineError", "ProcessOutcome", "find_engine", "run_process", "unbuffered", "kill_group",
+__all__ = ["EngineError", "ProcessOutcome", "die_with_parent", "find_engine", "run_process", "unbuffered", "kill_group",
            "describe_failure", "error_line"]

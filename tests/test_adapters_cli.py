@@ -152,3 +152,38 @@ def test_engine_error_mid_run_is_surfaced(tmp_path):
     assert r.returncode == 3
     assert "ERROR: Unknown command: no_such_command_xyz" in r.stderr.splitlines()[0]
     assert RunResult.load(deck / "result").status == "incomplete"
+
+
+def test_an_engine_dies_with_a_killed_caller(tmp_path):
+    # a caller (e.g. a study case past its time limit) started an engine and is killed with SIGKILL: the engine
+    # must not live on (PR_SET_PDEATHSIG in adapters.process.die_with_parent)
+    import signal
+    import time
+
+    pidfile = tmp_path / "engine.pid"
+    caller = subprocess.Popen([sys.executable, "-c", (
+        "import sys; from adapters.process import run_process; "
+        f"run_process(['sh', '-c', 'echo $$ > {pidfile}; exec sleep 60'], '.', '{tmp_path / 'log'}', timeout=120)")],
+        cwd=ROOT)
+    for _ in range(200):
+        if pidfile.exists() and pidfile.read_text().strip():
+            break
+        time.sleep(0.05)
+    engine = int(pidfile.read_text())
+
+    def alive(pid):  # a zombie waiting for its new parent to reap it counts as dead
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except (FileNotFoundError, IndexError):
+            return False
+
+    assert alive(engine)
+    caller.send_signal(signal.SIGKILL)
+    caller.wait()
+    for _ in range(100):
+        if not alive(engine):
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(engine, signal.SIGKILL)
+        raise AssertionError("the engine outlived its killed caller")
