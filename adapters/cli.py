@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 
-from sgim.cli import EXIT_BAD_INPUT, CliError, _progress
+from sgim.cli import CliError, _progress, run_command
 
 EXIT_ENGINE = 3
 
@@ -78,21 +78,12 @@ def main(argv=None):
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_run)
     args = ap.parse_args(argv)
-    from sgim.scene import SceneError
-
     from .deck import DeckError
     from .process import EngineError
     from .spec import SpecError
 
     try:
-        return args.func(args)
-    except (SceneError, DeckError, SpecError, CliError) as exc:
-        print(f"adapters: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except BrokenPipeError:
-        from sgim.cli import reader_gone
-
-        return reader_gone()
+        return run_command("adapters", args, bad_input=(DeckError, SpecError))
     except EngineError as exc:
         print(f"adapters: error: {exc}", file=sys.stderr)
         if exc.result is not None:

@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import EXIT_BAD_INPUT, CliError, _progress
+from sgim.cli import EXIT_BAD_INPUT, CliError, _progress, run_command
 from sgim.scene import SceneError
 
 STUDY_KEYS = {"name", "description", "base", "engine", "results", "seed", "timeout", "parameters", "sampling"}
@@ -678,14 +678,7 @@ def make_parser():
 def main(argv=None):
     args = make_parser().parse_args(argv)
     try:
-        return args.func(args)
-    except (SceneError, CliError) as exc:
-        print(f"cases study: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except BrokenPipeError:
-        from sgim.cli import reader_gone
-
-        return reader_gone()
+        return run_command("cases study", args)
     except KeyboardInterrupt:
         print("cases study: interrupted: the finished cases are in the table (run the same command again to "
               "finish)", file=sys.stderr)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import EXIT_BAD_INPUT, CliError, _progress, replace_folder  # the same CLI conventions as sgim
+from sgim.cli import CliError, _progress, replace_folder, run_command  # the same CLI conventions as sgim
 
 from .results import ENERGY_COLUMNS
 
@@ -266,14 +266,7 @@ def make_parser():
 
 
 def main(argv=None):
-    from sgim.scene import SceneError
-
-    args = make_parser().parse_args(argv)
-    try:
-        return args.func(args)
-    except (SceneError, CliError) as exc:
-        print(f"dda: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    return run_command("dda", make_parser().parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -35,10 +35,11 @@ import time
 
 import numpy as np
 
+from sgim.cli import EXIT_BAD_INPUT
+
 from . import hoekbray
 
 G = 9.81
-EXIT_BAD_INPUT = 2
 
 
 class WedgeInputError(ValueError):

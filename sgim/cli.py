@@ -247,17 +247,23 @@ def make_parser():
     return p
 
 
-def main(argv=None):
+def run_command(prog, args, bad_input=()):
+    """``args.func(args)`` under the CLI conventions of every command of the project: bad input (SceneError,
+    CliError and the `bad_input` exception types) prints one line ``PROG: error: ...`` and gives exit status 2;
+    a reader closing the pipe (e.g. ``head``) ends the command quietly with status 0."""
     from .scene import SceneError
 
-    args = make_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (SceneError, CliError) as exc:
-        print(f"sgim: error: {exc}", file=sys.stderr)
+    except (SceneError, CliError, *bad_input) as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:
         return reader_gone()
+
+
+def main(argv=None):
+    return run_command("sgim", make_parser().parse_args(argv))
 
 
 if __name__ == "__main__":
