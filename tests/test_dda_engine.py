@@ -8,20 +8,12 @@ from dda.blockspec import BlockSpec
 from dda.polyhedra import PolyhedronError, faces_around_vertex, half_edges, mass_properties
 from dda.simulation import BlowUpError, ContactLaw, Simulation
 from dda.system import BlockSystem
+from blocks import box  # independent of dda.shapes
 
 G = 9.81
 
 
 # ---------------------------------------------------------------- local block helpers (independent of dda.shapes)
-def box(lo, hi, **kw):
-    x0, y0, z0 = lo
-    x1, y1, z1 = hi
-    v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
-                  [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
-    f = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
-    return BlockSpec(v, f, **kw)
-
-
 def tetra(a=1.0):
     v = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float) * a / (2 * math.sqrt(2))
     f = [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]]

@@ -5,22 +5,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dda.blockspec import BlockSpec
 from dda.scene import scene_from_dict
 from dda.simulation import ContactLaw, Simulation
 from dda.system import BlockSystem
+from blocks import box  # independent of dda.shapes
 from sgim.scene import SceneError
 
 G = 9.81
-
-
-def box(lo, hi, **kw):
-    x0, y0, z0 = lo
-    x1, y1, z1 = hi
-    v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
-                  [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
-    f = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
-    return BlockSpec(v, f, **kw)
 
 
 def test_body_load_gives_uniform_acceleration():

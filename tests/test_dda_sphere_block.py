@@ -6,21 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from dda.blockspec import BlockSpec
 from dda.simulation import ContactLaw
 from dda.spheres import BondLaw, SphereSet, SphereSimulation
 from dda.system import BlockSystem
+from blocks import box  # independent of dda.shapes
 
 G = 9.81
-
-
-def box(lo, hi, **kw):
-    x0, y0, z0 = lo
-    x1, y1, z1 = hi
-    v = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
-                  [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
-    f = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
-    return BlockSpec(v, f, **kw)
 
 
 def test_sphere_dropped_on_a_free_block_comes_to_rest_on_the_total_weight():
