@@ -25,8 +25,6 @@ it saved into `out` (default DECK/result).
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import tomllib
 from pathlib import Path
 
@@ -118,7 +116,7 @@ def _apply_overrides(run, ov, path):
 
 def export(source, to, out, variant=None, overrides=None, progress=None):
     """Write the deck folder `out` for engine/format `to` from `source`; returns its deck.json dict."""
-    from sgim.cli import replace_folder
+    from sgim.cli import assembled_folder
 
     if to not in TARGETS:
         raise DeckError(f"--to: unknown target {to!r} (choose from {', '.join(TARGETS)})")
@@ -138,10 +136,7 @@ def export(source, to, out, variant=None, overrides=None, progress=None):
         raise DeckError(f"{source}: the model has no spheres")
     if to == "pfc-text" and model is None:
         raise DeckError(f"{source}: pfc-text needs an sgim model or scene (a run.npz has no model)")
-    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+    with assembled_folder(out) as tmp:
         info = {"engine": to, "variant": variant, "source": str(source)}
         if kind == "blocks":
             from .yade_poly import write_polyhedra_deck
@@ -167,10 +162,6 @@ def export(source, to, out, variant=None, overrides=None, progress=None):
                 write_vtu(run, tmp)
         info["files"] = sorted(p.name for p in tmp.iterdir())
         (tmp / "deck.json").write_text(json.dumps(info, indent=2))
-        replace_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     if progress:
         progress(f"deck       {out}: {info['engine']} ({', '.join(info['files'])})")
     return info

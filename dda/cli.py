@@ -8,15 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import CliError, _progress, replace_folder, run_command  # the same CLI conventions as sgim
+from sgim.cli import CliError, _progress, assembled_folder, run_command  # the same CLI conventions as sgim
 
 from .results import ENERGY_COLUMNS
 
@@ -128,10 +126,7 @@ def _run_spheres(scene, out, args, say, t0):
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
             f"{ss.n_joints} smooth joints, {len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s)")
-    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+    with assembled_folder(out) as tmp:
         want_vtu = "vtu" in scene.formats
         entries = []
         if want_vtu:
@@ -182,10 +177,6 @@ def _run_spheres(scene, out, args, say, t0):
             "energy_final": dict(zip(ENERGY_COLUMNS, [float(x) for x in e])),
         }
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
-        replace_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     if status != "ok":
         print(f"dda: error: {message} (last good state written to {out})", file=sys.stderr)
         return EXIT_BLOWUP
@@ -210,10 +201,7 @@ def cmd_run(args):
     if say:
         say(f"scene      {scene.name}: {bs.n_blocks} blocks ({len(sim.active)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s), {int(round(scene.duration / sim.dt))} steps")
-    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+    with assembled_folder(out) as tmp:
         frames = []
         want_vtu = "vtu" in scene.formats
         if want_vtu:
@@ -235,10 +223,6 @@ def cmd_run(args):
             "contacts_final": int(sim.stats[5]), "points_final": int(sim.stats[6]),
         }
         _write_outputs(scene, sim, res, tmp, frames, summary, say)
-        replace_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     if status != "ok":
         print(f"dda: error: {message} (last good state written to {out})", file=sys.stderr)
         return EXIT_BLOWUP

@@ -12,6 +12,7 @@ import os
 import shutil
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 EXIT_BAD_INPUT = 2
@@ -59,10 +60,7 @@ def cmd_build(args):
     if say:
         say(f"parse      {timer.t['parse']:7.2f} s  {args.scene}")
     model = build_model(scene, timer=timer)
-    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+    with assembled_folder(out) as tmp:
         model.save(tmp / "model.npz")
         timer.lap("write npz", str(out / "model.npz"))
         if "vtu" in formats:
@@ -86,10 +84,6 @@ def cmd_build(args):
         info = summary(model, timer.t)
         info["timings_s"]["total"] = round(time.perf_counter() - t0, 4)
         (tmp / "summary.json").write_text(json.dumps(info, indent=2))
-        replace_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     if args.json:
         print(json.dumps(info, indent=2))
     elif not args.quiet:
@@ -114,18 +108,11 @@ def cmd_dfn(args):
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: output exists and is not a folder")
     net = network_for(scene, progress=say)
-    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+    with assembled_folder(out) as tmp:
         write_network(net, tmp)
         info = {"scene": scene.name, "scene_path": str(scene.path), **net.summary(),
                 "seconds": round(time.perf_counter() - t0, 4)}
         (tmp / "summary.json").write_text(json.dumps(info, indent=2))
-        replace_folder(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     if args.json:
         print(json.dumps(info, indent=2))
     elif not args.quiet:
@@ -133,6 +120,22 @@ def cmd_dfn(args):
         for line in format_statistics(net):
             print("  " + line)
     return 0
+
+
+@contextmanager
+def assembled_folder(out):
+    """A command's output folder, assembled under a temporary name beside ``out`` (``.NAME.partPID``): on
+    success it replaces ``out`` (replace_folder); on any error it is removed, so a failed command leaves no
+    output behind."""
+    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    replace_folder(tmp, out)
 
 
 def replace_folder(tmp, out):
