@@ -565,11 +565,7 @@ class SphereSimulation:
             self.time += done * self.dt
             nsteps -= done
             if status == _sp.NEED_CAPACITY:
-                old = (self.cur.copy(), self.c_n.copy(), self.c_key, self.c_us, self.c_fn, self.c_ij)
-                cap = self.c_key.shape[1]
-                self._alloc(max(2 * cap, int(1.5 * self.stats[4])))
-                self.cur[:], self.c_n[:] = old[0], old[1]
-                self.c_key[:, :cap], self.c_us[:, :cap], self.c_fn[:, :cap], self.c_ij[:, :cap] = old[2:]
+                self._grow_sphere_contacts()
                 continue
             if status == _sp.NEED_PAIRS:
                 self.nl_pairs = np.zeros((int(1.5 * self.stats[5]) + 64, 2), np.int64)
