@@ -175,7 +175,7 @@ def write_vtu(run: SphereRun, folder):
     """spheres.vtu (vertex cells: radius, colour, fixed, intact-bond count) and bonds.vtu (one line per bond)."""
     import meshio
 
-    from sgim.model import atomic_path
+    from sgim.model import atomic_vtu
 
     n = run.n
     nb = np.bincount(np.r_[run.bond_i, run.bond_j].astype(np.int64), minlength=n)
@@ -186,8 +186,7 @@ def write_vtu(run: SphereRun, folder):
                         cell_data={"kn": [run.bond_kn], "tensile_force": [np.where(np.isfinite(run.bond_ft),
                                                                                     run.bond_ft, -1.0)]})
     for name, mesh in (("spheres.vtu", pts), ("bonds.vtu", lines)):
-        with atomic_path(Path(folder) / name) as tmp:
-            meshio.write(tmp, mesh, file_format="vtu", binary=True, compression=None)
+        atomic_vtu(Path(folder) / name, mesh)
 
 
 def read_deck(deck):

@@ -62,7 +62,7 @@ class RunResult:
 
     def save(self, folder):
         """Write result.npz and result.json into `folder` (each written under a temporary name first)."""
-        from sgim.model import atomic_path
+        from sgim.model import atomic_npz, atomic_path
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -71,9 +71,7 @@ class RunResult:
                 "final_pos": self.final_pos, "final_vel": self.final_vel,
                 "bond_intact": np.asarray(self.bond_intact, bool)}
         data.update({f"series_{k}": np.asarray(v) for k, v in self.series.items()})
-        with atomic_path(folder / "result.npz") as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **data)
+        atomic_npz(folder / "result.npz", data)
         head = {"engine": self.engine, "status": self.status, "message": self.message, "steps": int(self.steps),
                 "dt": float(self.dt), "wall_s": float(self.wall_s), "n": int(self.n),
                 "n_bonds": int(len(self.bond_intact)), "bonds_intact": int(np.sum(self.bond_intact)),

@@ -116,13 +116,11 @@ class SphereRun:
     # -- files ---------------------------------------------------------------
     def save(self, path):
         """One npz: the arrays plus a JSON string ``header`` with the scalars."""
-        from sgim.model import atomic_path
+        from sgim.model import atomic_npz
 
         data = {k: np.asarray(getattr(self, k)) for k in ARRAYS}
         data["header"] = np.array(json.dumps(self.scalars()))
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **data)
+        atomic_npz(path, data)
 
     @classmethod
     def load(cls, path):

@@ -699,7 +699,7 @@ class Network:
         """The discs as polygons (``segments`` vertices each) with per-disc cell data."""
         import meshio
 
-        from .model import atomic_path
+        from .model import atomic_vtu
 
         n = len(self)
         N = self.normals
@@ -717,8 +717,7 @@ class Network:
             "set": [self.set_index.astype(np.int32)], "row": [np.arange(n, dtype=np.int32)],
             "radius": [self.radii], "thickness": [self.thickness], "area_in_domain": [self.area],
         } if n else {})
-        with atomic_path(path) as tmp:
-            meshio.write(tmp, mesh, file_format="vtu", binary=True, compression=None)
+        atomic_vtu(path, mesh)
 
 
 def orientation_stats(normals):

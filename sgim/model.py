@@ -134,9 +134,7 @@ class SphereModel:
         data["meta"] = np.array(json.dumps(self.meta))
         data["scene_toml"] = np.array(self.scene_toml)
         data.update({k: np.array(v, dtype=str) if k == "surf_name" else v for k, v in self.surfaces.items()})
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **data)
+        atomic_npz(path, data)
 
     @classmethod
     def load(cls, path):
@@ -169,8 +167,7 @@ class SphereModel:
                 "bonds": nb.astype(np.int32),
             },
         )
-        with atomic_path(path) as tmp:
-            meshio.write(tmp, mesh, file_format="vtu", binary=True, compression=None)
+        atomic_vtu(path, mesh)
 
     def save_text(self, balls_path, bonds_path):
         """PFC-style text: 'id x y z r colour' per ball, 'id1 id2 bonded cut_by' per contact (1-based ids)."""
@@ -193,6 +190,21 @@ def _write_rows(fh, fmt, cols, chunk=200_000):
     for s in range(0, n, chunk):
         rows = zip(*(c[s:s + chunk].tolist() for c in cols))
         fh.write("".join(line % r for r in rows))
+
+
+def atomic_npz(path, data):
+    """np.savez of the dict `data` to `path`, written under a temporary name and renamed into place."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **data)
+
+
+def atomic_vtu(path, mesh):
+    """A meshio Mesh written as binary VTU to `path` under a temporary name and renamed into place."""
+    import meshio
+
+    with atomic_path(path) as tmp:
+        meshio.write(tmp, mesh, file_format="vtu", binary=True, compression=None)
 
 
 class atomic_path:
