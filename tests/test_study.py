@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from cases.study import dump_toml, load_study, main
+from engine_runs import CI
 
 REPO = Path(__file__).resolve().parent.parent
-CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
 BASE = """\
 name = "base"
