@@ -47,19 +47,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, objmode, prange
+from numba import njit, prange
 
 from . import _excavate as EX
 from . import _meshq as MQ
-
-PROGRESS = [None]  # callable(placed, pending) for progress lines, set by sgim/rpack.py
-
-
-def progress_hook(placed, pending):
-    cb = PROGRESS[0]
-    if cb is not None:
-        cb(int(placed), int(pending))
-
 
 SUP_NONE = -100  # seed: no supports
 SUP_PLANE0 = -20  # the candidate's first stored plane
@@ -69,6 +60,8 @@ SUP_PLANE1 = -21  # its second stored plane
 BLOCK = 4  # cells per block side (block counts of the level grid)
 BIG = 1e300
 DEEP = 0.5  # see the pair loop of pack()
+PAD = 8  # vector length the neighbour loops are padded to
+PCAP = 16384  # pairs solved in one chunk (>= the neighbour cap, so one neighbour's pairs always fit)
 
 
 # ---------------------------------------------------------------------------
@@ -473,10 +466,61 @@ def _grow1(a, n, fill):
     return b
 
 
+# zones (parallel packing of a constant radius): the region is cut across its longer horizontal
+# axis into two halves A, B and a strip of half width w around the cut, itself in two sides
+# SA, SB.  The packing rises in bands: A and B fill their pockets below the band's top at the same
+# time, then the strip fills its own.  w is wide enough (see sgim/rpack.py) that a sphere placed
+# in A reads and writes nothing that B reads or writes, so the result does not depend on the
+# threads, only on the zones.  One zone (0) when not parallel.
+ZSN, ZCN, ZNF, ZHN, ZBM = 0, 1, 2, 3, 4  # per zone: spheres, fresh candidate slots used, free slots, queued, lowest bucket
+ST_DONE, ST_PAUSE, ST_FULL = 0, 1, 2
+
+
+@njit(cache=True, inline="always")
+def zone_of(ZG, x, y):
+    """ZG = (parallel, axis, cut, half width): 0 (A), 1 (B), 2 (SA), 3 (SB); 0 when not parallel."""
+    if ZG[0] == 0.0:
+        return 0
+    v = x if ZG[1] == 0.0 else y
+    if v < ZG[2] - ZG[3]:
+        return 0
+    if v >= ZG[2] + ZG[3]:
+        return 1
+    return 2 if v < ZG[2] else 3
+
+
+@njit(cache=True)
+def _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow):
+    """A candidate slot in zone kz (its free list first): (slot or -1 when full, arrays, grown
+    when grow)."""
+    if ZS[kz, ZNF] > 0:
+        ZS[kz, ZNF] -= 1
+        return freel[cbase[kz] + ZS[kz, ZNF]], CF, CI, cpl, freel
+    c = cbase[kz] + ZS[kz, ZCN]
+    if c == cend[kz]:
+        if not grow:
+            return -1, CF, CI, cpl, freel
+        ncap = 2 * CF.shape[0]  # one zone: its range is the whole array
+        CF = _grow2(CF, ncap)
+        CI = _grow2(CI, ncap)
+        cpl = _grow2(cpl, ncap)
+        freel = _grow1(freel, ncap, 0)
+        cend[kz] = ncap
+    ZS[kz, ZCN] += 1
+    return c, CF, CI, cpl, freel
+
+
+@njit(cache=True, inline="always")
+def _free_cand(c, ZS, cbase, CI, freel):
+    kz = CI[c, 9]
+    freel[cbase[kz] + ZS[kz, ZNF]] = c
+    ZS[kz, ZNF] += 1
+
+
 @njit(cache=True, error_model="numpy")
-def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff, discs, fseq,
-         seeds, seed_r, X0, R0, cap0):
-    """Pocket-filling packing.  Returns (X, R, Dist, counters).
+def pack_init(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff, discs, fseq,
+               seeds, seed_r, X0, R0, cap0, ZG, zcap, zccap):
+    """State of a pocket-filling packing (see sgim/rpack.py, _pack_kernel, for the loop that fills it).
 
     lo, hi      domain box; tol: overlap tolerance (fraction of the smaller radius)
     G           grid geometry (org, cs, dims, coff, rlo, rmax, bdims, boff)
@@ -486,28 +530,46 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
     grade       (rf, rc, df, dc, spread) for mode 2; Dg, goff, discs = (centres, normals, radii,
                 half thickness): the named objects; fseq: spread factors (mode 2)
     seeds       (k,3) seed positions, seed_r their radii (mode 2 recomputes them)
-    X0, R0      spheres already placed (kept as they are)
+    X0, R0      spheres already placed (kept as they are; one zone only)
+    cap0        sphere capacity (one zone: grows as needed)
+    ZG          zones (see zone_of); zcap, zccap (4,): sphere and candidate room of each zone when
+                parallel (fixed)
+    Returns the state: spheres, grid, candidates, queues, zone counters, pool, the work arrays of
+    two threads; CNT[0, 8] = 1 when the seeds do not fit a zone.
     """
     org, cs, dims, coff, rlo, rmax, bdims, boff = G
-    ec, cstart, cfac, g0x, g0y, gs, gnx, gny = exc
     rf, rc, df, dcg, spread = grade
     dcen, dnrm, drad, dhalf = discs
     has_mesh = Dc[12].shape[0] > 0
-    check_region = has_mesh or gnx > 0
-    tiny_tol = tol < 1e-9
+    nz = 4 if ZG[0] != 0.0 else 1
+    grow = nz == 1
 
-    cap = max(cap0, X0.shape[0] + 16)
+    sbase = np.zeros(nz, np.int64)
+    send = np.zeros(nz, np.int64)
+    cbase = np.zeros(nz, np.int64)
+    cend = np.zeros(nz, np.int64)
+    if nz == 1:
+        send[0] = max(cap0, X0.shape[0] + 16)
+        cend[0] = max(1024, 4 * seeds.shape[0] + 4096)
+    else:
+        for k in range(nz):
+            sbase[k] = send[k - 1] if k > 0 else 0
+            send[k] = sbase[k] + zcap[k]
+            cbase[k] = cend[k - 1] if k > 0 else 0
+            cend[k] = cbase[k] + zccap[k]
+    cap = send[nz - 1]
+    ccap = cend[nz - 1]
     X = np.empty((cap, 3))
     R = np.empty(cap)
     XR = np.empty((cap, 4))  # X and R side by side for the grid kernels
     DGL = np.zeros(cap)  # bounds of the grading distance of each sphere (mode 2)
     DGH = np.zeros(cap)
-    pdl, pdh = 0.0, 0.0
     nxt = np.full(cap, -1, np.int32)
     FP = np.zeros((cap, 4))  # each sphere's tangent plane on the nearest constraint surface
     FPk = np.full(cap, -1, np.int8)  # its mesh (-1: none within reach)
     head = np.full(coff[-1], -1, np.int32)
     bcnt = np.zeros(boff[-1], np.int32)
+    ZS = np.zeros((nz, 8), np.int64)
     n = 0
     for i in range(X0.shape[0]):
         X[n] = X0[i]
@@ -532,91 +594,168 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     FPk[n] = k
         n += 1
     n_initial = n
+    ZS[0, ZSN] = n
 
     # candidates
-    ccap = max(1024, 4 * seeds.shape[0] + 4096)
     # a candidate in two rows: CF position and radius; CI supports (3), the number of spheres
-    # when it was made, and its queue links (bucket, next, previous; creator's list next, previous)
+    # when it was made, its queue links (bucket, next, previous; creator's list next, previous)
+    # and its zone (9)
     CF = np.empty((ccap, 4))
     CI = np.empty((ccap, 16), np.int32)
     cpl = np.empty((ccap, 8))
     freel = np.empty(ccap, np.int64)
-    nfree = 0
-    ncand = 0
-    # the queue (see q_push): bucket of each candidate, links in its bucket and on its creator's list
+    # the queue of each zone (see q_push): bucket of each candidate, links in its bucket and on its
+    # creator's list
     ohead = np.full(cap, -1, np.int32)  # each sphere's newest queued candidate
     qz0 = lo[2] - 4.0 * rmax[-1]
     qspan = hi[2] - qz0 + 4.0 * rmax[-1]
     nbk = min(int(qspan / (QRES * rmax[0])) + 2, 1 << 22)
     qinv = (nbk - 2) / qspan
-    bhead = np.full(nbk, -1, np.int64)
-    bmin = nbk - 1
-    hn = 0  # queued candidates
+    bhead = np.full((nz, nbk), -1, np.int64)
+    for k in range(nz):
+        ZS[k, ZBM] = nbk - 1
 
-    # pool of radii (mode 1), sorted descending
+    # pool of radii (mode 1), sorted descending; MS: pooled radii, next draw, spread factors used
     pool = np.empty(max(pool_size, 1))
-    npool = 0
-    iseq = 0
+    MS = np.zeros(4, np.int64)
     if mode == 1:
-        while npool < pool_size and iseq < rseq.shape[0]:
-            v = rseq[iseq]
-            iseq += 1
-            p = npool
+        while MS[0] < pool_size and MS[1] < rseq.shape[0]:
+            v = rseq[MS[1]]
+            MS[1] += 1
+            p = MS[0]
             while p > 0 and pool[p - 1] < v:
                 pool[p] = pool[p - 1]
                 p -= 1
             pool[p] = v
-            npool += 1
-    ifac = 0
+            MS[0] += 1
 
+    # work arrays of the two threads
     nbcap = 4096
-    nb = np.empty(nbcap, np.int64)
-    nbx = np.empty((nbcap, 3))
-    nbr = np.empty(nbcap)
-    nbh = np.empty(nbcap, np.int64)
-    nU = np.empty(nbcap)  # per neighbour, for the (S, A, B) pockets (see there)
-    nV = np.empty(nbcap)
-    nW = np.empty(nbcap)
-    nUU = np.empty(nbcap)
-    nKU = np.empty(nbcap)
-    nL2 = np.empty(nbcap)
-    BV = np.empty((5, nbcap))
-    SQ = np.empty((7, nbcap))
-    pb = np.empty(nbcap, np.int64)
-    out = np.empty((2, 3))
-    out2 = np.empty((2, 3))
-    pl = np.empty((6 + 64 + 256, 4))  # planes near the new sphere: nx ny nz h (kept side: n.x >= h)
-    plid = np.empty(6 + 64 + 256, np.int64)
-    plown = np.full(6 + 64 + 256, -1, np.int64)  # -1: for every neighbour; a: only for neighbour a
-    # counters: pops, placed, pockets pushed, pop rejects, seeds placed
-    cnt = np.zeros(8, np.int64)
+    NB = np.empty((2, nbcap), np.int64)
+    NBX = np.empty((2, nbcap, 3))
+    NBR = np.empty((2, nbcap))
+    NBH = np.empty((2, nbcap), np.int64)
+    NT = np.empty((2, 6, nbcap))  # per neighbour, for the (S, A, B) pockets (see there)
+    SQ = np.empty((2, 7, PCAP))
+    PP = np.empty((2, 2, PCAP), np.int32)  # the pairs (A, B) of a chunk
+    OUT = np.empty((2, 4, 3))
+    npl_cap = 6 + 64 + 256
+    PL = np.empty((2, npl_cap, 4))  # planes near the new sphere: nx ny nz h (kept side: n.x >= h)
+    PLID = np.empty((2, npl_cap), np.int64)
+    PLOWN = np.full((2, npl_cap), -1, np.int64)  # -1: for every neighbour; a: only for neighbour a
+    # counters of each zone: pops, placed, pockets pushed, pop rejects, seeds placed, -, -, covered
+    CNT = np.zeros((nz, 9), np.int64)
 
     for s in range(seeds.shape[0]):
-        if ncand == ccap:
+        kz = zone_of(ZG, seeds[s, 0], seeds[s, 1])
+        c, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
+        if c < 0:
+            CNT[0, 8] = 1
             break
-        c = ncand
-        ncand += 1
         CF[c, 0], CF[c, 1], CF[c, 2] = seeds[s, 0], seeds[s, 1], seeds[s, 2]
         CF[c, 3] = seed_r[s]
         CI[c, 3] = 0
         CI[c, 0] = SUP_NONE
         CI[c, 1] = SUP_NONE
         CI[c, 2] = SUP_NONE
+        CI[c, 9] = kz
         # seeds go by the height of the floor under them (not of their centre: no sifting by
         # radius) and before the pockets at the same height
         b = q_bucket(seeds[s, 2] - seed_r[s] - 1e-9 * (abs(seeds[s, 2]) + seed_r[s]), qz0, qinv, nbk)
-        q_push(bhead, CI, ohead, c, b, -1)
-        bmin = min(bmin, b)
-        hn += 1
+        q_push(bhead[kz], CI, ohead, c, b, -1)
+        ZS[kz, ZBM] = min(ZS[kz, ZBM], b)
+        ZS[kz, ZHN] += 1
 
-    while hn > 0:
-        while bhead[bmin] < 0:
-            bmin += 1
-        c = bhead[bmin]
-        q_remove(bhead, CI, ohead, c, CI[c, 0])
-        hn -= 1
-        freel[nfree] = c
-        nfree += 1
+    return (X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, head, bcnt, CF, CI, cpl, freel, bhead, ZS, sbase, send, cbase,
+            cend, CNT, MS, pool, qz0, qinv, n_initial,
+            (NB[0], NBX[0], NBR[0], NBH[0], NT[0], SQ[0], PP[0], OUT[0], PL[0], PLID[0], PLOWN[0]),
+            (NB[1], NBX[1], NBR[1], NBH[1], NT[1], SQ[1], PP[1], OUT[1], PL[1], PLID[1], PLOWN[1]))
+
+
+@njit(cache=True)
+def lowest_bucket(ZS, bhead):
+    """Lowest queued bucket over all zones (-1: none queued)."""
+    lowest = -1
+    for k in range(ZS.shape[0]):
+        if ZS[k, ZHN] > 0:
+            while bhead[k, ZS[k, ZBM]] < 0:
+                ZS[k, ZBM] += 1
+            if lowest < 0 or ZS[k, ZBM] < lowest:
+                lowest = ZS[k, ZBM]
+    return lowest
+
+
+@njit(cache=True)
+def pack_finish(X, R, DGL, ZS, sbase, CNT, MS, n_initial):
+    """The packing's spheres, zone by zone, and its counters."""
+    nz = ZS.shape[0]
+    cnt = np.zeros(9, np.int64)
+    for k in range(nz):
+        for q in range(9):
+            cnt[q] += CNT[k, q]
+    cnt[5] = n_initial
+    cnt[6] = MS[0]
+    ntot = 0
+    for k in range(nz):
+        ntot += ZS[k, ZSN]
+    Xo = np.empty((ntot, 3))
+    Ro = np.empty(ntot)
+    Do = np.empty(ntot)
+    o = 0
+    for k in range(nz):
+        for i in range(sbase[k], sbase[k] + ZS[k, ZSN]):
+            Xo[o, 0], Xo[o, 1], Xo[o, 2] = X[i, 0], X[i, 1], X[i, 2]
+            Ro[o] = R[i]
+            Do[o] = DGL[i]
+            o += 1
+    return Xo, Ro, Do, cnt
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def fill(z0, z1, bz, budget, grow, args, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, head, bcnt, CF, CI, cpl, freel,
+         bhead, ZS, ZG, sbase, send, cbase, cend, CNT, MS, pool, qz0, qinv, W):
+    """Fill the pockets of zones z0..z1 below bucket bz, lowest first, for at most budget spheres.
+    Returns (status, the arrays, grown when grow)."""
+    lo, hi, tol, G, Dc, exc, mode, rconst, rseq, grade, Dg, goff, discs, fseq = args
+    nb, nbx, nbr, nbh, NT, SQ, PP, OUT, pl, plid, plown = W
+    nU, nV, nW, nUU, nKU, nL2 = NT[0], NT[1], NT[2], NT[3], NT[4], NT[5]
+    PA, PB = PP[0], PP[1]
+    out, out2 = OUT[0:2], OUT[2:4]
+    org, cs, dims, coff, rlo, rmax, bdims, boff = G
+    ec, cstart, cfac, g0x, g0y, gs, gnx, gny = exc
+    rf, rc, df, dcg, spread = grade
+    dcen, dnrm, drad, dhalf = discs
+    has_mesh = Dc[12].shape[0] > 0
+    check_region = has_mesh or gnx > 0
+    tiny_tol = tol < 1e-9
+    nbk = bhead.shape[1]
+    nbcap = nb.shape[0]
+    cnt = CNT[z0]
+    npool, iseq, ifac = MS[0], MS[1], MS[2]
+    pdl, pdh = 0.0, 0.0
+    stop = cnt[1] + budget
+    status = ST_DONE
+    while True:
+        if cnt[1] >= stop:
+            status = ST_PAUSE
+            break
+        kp = -1
+        bb = bz
+        for k in range(z0, z1 + 1):
+            if ZS[k, ZHN] > 0:
+                bm = ZS[k, ZBM]
+                while bhead[k, bm] < 0:
+                    bm += 1
+                ZS[k, ZBM] = bm
+                if bm < bb:
+                    bb = bm
+                    kp = k
+        if kp < 0:
+            break
+        c = bhead[kp, bb]
+        q_remove(bhead[kp], CI, ohead, c, CI[c, 0])
+        ZS[kp, ZHN] -= 1
+        _free_cand(c, ZS, cbase, CI, freel)
         cnt[0] += 1
         r0 = CF[c, 3]
         px, py, pz = 0.0, 0.0, 0.0
@@ -709,8 +848,11 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             cnt[3] += 1
             continue
         # --- place ---------------------------------------------------------------
-        if n == cap:
-            cap = cap + cap // 2 + 16
+        i = sbase[kp] + ZS[kp, ZSN]
+        if i == send[kp]:
+            if not grow:
+                return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
+            cap = X.shape[0] + X.shape[0] // 2 + 16  # one zone: its range is the whole array
             X = _grow2(X, cap)
             XR = _grow2(XR, cap)
             R = _grow1(R, cap, 0.0)
@@ -720,8 +862,8 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             FP = _grow2(FP, cap)
             FPk = _grow1(FPk, cap, -1)
             ohead = _grow1(ohead, cap, -1)
-        i = n
-        n += 1
+            send[kp] = cap
+        ZS[kp, ZSN] += 1
         X[i, 0], X[i, 1], X[i, 2] = px, py, pz
         R[i] = rr
         XR[i, 0], XR[i, 1], XR[i, 2], XR[i, 3] = px, py, pz, rr
@@ -734,9 +876,6 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             DGL[i], DGH[i] = pdl, (pdh if pdh < dcg else BIG)
         grid_insert(org, cs, dims, coff, rlo, bdims, boff, head, nxt, bcnt, i, px, py, pz, rr)
         cnt[1] += 1
-        if cnt[1] % 50000 == 0:
-            with objmode():
-                progress_hook(n, hn)
         if CI[c, 0] == SUP_NONE:
             cnt[4] += 1
 
@@ -764,10 +903,10 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                 dz = CF[c2, 2] - pz
                 lim = rq + rr - tol * min(rq, rr)
                 if dx * dx + dy * dy + dz * dz < lim * lim:
-                    q_remove(bhead, CI, ohead, c2, nb[a])
-                    hn -= 1
-                    freel[nfree] = c2
-                    nfree += 1
+                    kq = CI[c2, 9]
+                    q_remove(bhead[kq], CI, ohead, c2, nb[a])
+                    ZS[kq, ZHN] -= 1
+                    _free_cand(c2, ZS, cbase, CI, freel)
                     cnt[7] += 1
                 c2 = c3
         # the nearest neighbour first: it excludes the most pocket directions (tried before the others)
@@ -869,26 +1008,42 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
         for a in range(m):
             nbh[nhigh] = a
             nhigh += nW[a] + pz >= zcut
+        # pad the neighbour terms to a multiple of PAD with far-away dummies (the clearance loop
+        # below then runs whole vector lengths, no remainder)
+        mp = min((m + PAD - 1) // PAD * PAD, nbcap)
+        for e in range(m, mp):
+            nU[e], nV[e], nW[e], nL2[e] = 1e100, 0.0, 0.0, 0.0
+        # the pairs (A, B), A < B, within reach of each other, in chunks of at most PCAP: first
+        # listed without a branch, then solved in one loop, then checked
         hp = 0  # nbh[hp:] are the neighbours above zcut with an index > a
-        for a in range(m):
-            while hp < nhigh and nbh[hp] <= a:
-                hp += 1
-            ra = nbr[a]
-            ux, uy, uz, uu, ku = nU[a], nV[a], nW[a], nUU[a], nKU[a]
-            alow = uz + pz < zcut
-            nbt = (nhigh - hp) if alow else (m - a - 1)
-            # partners B within reach of A, their terms copied side by side (no branch)
+        a0 = 0
+        while a0 < m:
             npb = 0
-            for t in range(nbt):
-                b = nbh[hp + t] if alow else a + 1 + t
-                lim = ra + nbr[b] + 2.0 * rn
-                BV[0, npb], BV[1, npb], BV[2, npb], BV[3, npb], BV[4, npb] = nU[b], nV[b], nW[b], nUU[b], nKU[b]
-                pb[npb] = b
-                npb += (ux - nU[b]) ** 2 + (uy - nV[b]) ** 2 + (uz - nW[b]) ** 2 < lim * lim
+            while a0 < m and npb + m - a0 <= PCAP:
+                a = a0
+                a0 += 1
+                while hp < nhigh and nbh[hp] <= a:
+                    hp += 1
+                ux, uy, uz = nU[a], nV[a], nW[a]
+                ra2 = nbr[a] + 2.0 * rn
+                alow = uz + pz < zcut
+                nbt = (nhigh - hp) if alow else (m - a - 1)
+                for t in range(nbt):
+                    b = nbh[hp + t] if alow else a + 1 + t
+                    lim = ra2 + nbr[b]
+                    PA[npb] = a
+                    PB[npb] = b
+                    npb += (ux - nU[b]) ** 2 + (uy - nV[b]) ** 2 + (uz - nW[b]) ** 2 < lim * lim
+            for t in range(npb, (npb + PAD - 1) // PAD * PAD):
+                PA[t] = 0  # A = B: no pocket
+                PB[t] = 0
             # the pockets |Q| = ds, |Q - A| = ra + rn, |Q - B| = rb + rn (Q relative to S):
-            # Q = al A + be B +- g (A x B); none where g2 < 0 or A, B are aligned with S
-            for t in range(npb):
-                vx, vy, vz, vv, kv = BV[0, t], BV[1, t], BV[2, t], BV[3, t], BV[4, t]
+            # Q = al A + be B +- g (A x B); none (g < 0) where g2 < 0 or A, B are aligned with S
+            for t in range((npb + PAD - 1) // PAD * PAD):
+                a = PA[t]
+                b = PB[t]
+                ux, uy, uz, uu, ku = nU[a], nV[a], nW[a], nUU[a], nKU[a]
+                vx, vy, vz, vv, kv = nU[b], nV[b], nW[b], nUU[b], nKU[b]
                 uv = ux * vx + uy * vy + uz * vz
                 nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
                 det = nx * nx + ny * ny + nz * nz
@@ -908,7 +1063,8 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
             for t in range(npb):
                 if SQ[6, t] < 0.0:
                     continue
-                b = pb[t]
+                a = PA[t]
+                b = PB[t]
                 for q in range(2):
                     if q == 0:
                         qx, qy, qz = SQ[0, t] + SQ[3, t], SQ[1, t] + SQ[4, t], SQ[2, t] + SQ[5, t]
@@ -922,7 +1078,7 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     if not tiny_tol and (nU[0] - qx) ** 2 + (nV[0] - qy) ** 2 + (nW[0] - qz) ** 2 < nL2[0]:
                         continue
                     nblk = 0
-                    for e in range(m):
+                    for e in range(mp):
                         dx = nU[e] - qx
                         dy = nV[e] - qy
                         dz = nW[e] - qz
@@ -938,26 +1094,19 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     if check_region and not _region_ok(qx, qy, qz, rn, tol, has_mesh, Dc, ec, cstart, cfac, g0x,
                                                        g0y, gs, gnx, gny):
                         continue
-                    if nfree > 0:
-                        nfree -= 1
-                        cc = freel[nfree]
-                    else:
-                        if ncand == ccap:
-                            ccap = ccap * 2
-                            CF = _grow2(CF, ccap)
-                            CI = _grow2(CI, ccap)
-                            cpl = _grow2(cpl, ccap)
-                            freel = _grow1(freel, ccap, 0)
-                        cc = ncand
-                        ncand += 1
+                    kz = zone_of(ZG, qx, qy)
+                    cc, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
+                    if cc < 0:
+                        return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
+                    CI[cc, 9] = kz
                     CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
                     CF[cc, 3] = rn
-                    CI[cc, 3] = n
+                    CI[cc, 3] = i + 1
                     CI[cc, 0], CI[cc, 1], CI[cc, 2] = i, nb[a], nb[b]
                     bq = q_bucket(qz, qz0, qinv, nbk)
-                    q_push(bhead, CI, ohead, cc, bq, i)
-                    bmin = min(bmin, bq)
-                    hn += 1
+                    q_push(bhead[kz], CI, ohead, cc, bq, i)
+                    ZS[kz, ZBM] = min(ZS[kz, ZBM], bq)
+                    ZS[kz, ZHN] += 1
                     cnt[2] += 1
         # (S, A, plane) and (S, plane, plane)
         for p in range(npl):
@@ -986,29 +1135,22 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                             continue
                         if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, qx, qy, qz):
                             continue
-                    if nfree > 0:
-                        nfree -= 1
-                        cc = freel[nfree]
-                    else:
-                        if ncand == ccap:
-                            ccap = ccap * 2
-                            CF = _grow2(CF, ccap)
-                            CI = _grow2(CI, ccap)
-                            cpl = _grow2(cpl, ccap)
-                            freel = _grow1(freel, ccap, 0)
-                        cc = ncand
-                        ncand += 1
+                    kz = zone_of(ZG, qx, qy)
+                    cc, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
+                    if cc < 0:
+                        return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
+                    CI[cc, 9] = kz
                     CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
                     CF[cc, 3] = rn
-                    CI[cc, 3] = n
+                    CI[cc, 3] = i + 1
                     CI[cc, 0], CI[cc, 1] = i, nb[a]
                     CI[cc, 2] = plid[p]
                     if plid[p] == SUP_PLANE0:
                         cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
                     bq = q_bucket(qz, qz0, qinv, nbk)
-                    q_push(bhead, CI, ohead, cc, bq, i)
-                    bmin = min(bmin, bq)
-                    hn += 1
+                    q_push(bhead[kz], CI, ohead, cc, bq, i)
+                    ZS[kz, ZBM] = min(ZS[kz, ZBM], bq)
+                    ZS[kz, ZHN] += 1
                     cnt[2] += 1
             for p2 in range(p + 1, npl):
                 if (plid[p] == SUP_PLANE0 and plid[p2] == SUP_PLANE0) or plown[p] >= 0 or plown[p2] >= 0:
@@ -1034,21 +1176,14 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                             continue
                         if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, qx, qy, qz):
                             continue
-                    if nfree > 0:
-                        nfree -= 1
-                        cc = freel[nfree]
-                    else:
-                        if ncand == ccap:
-                            ccap = ccap * 2
-                            CF = _grow2(CF, ccap)
-                            CI = _grow2(CI, ccap)
-                            cpl = _grow2(cpl, ccap)
-                            freel = _grow1(freel, ccap, 0)
-                        cc = ncand
-                        ncand += 1
+                    kz = zone_of(ZG, qx, qy)
+                    cc, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
+                    if cc < 0:
+                        return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
+                    CI[cc, 9] = kz
                     CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
                     CF[cc, 3] = rn
-                    CI[cc, 3] = n
+                    CI[cc, 3] = i + 1
                     # a wall first, then the other support (a wall or the stored plane)
                     w1, w2 = plid[p], plid[p2]
                     if w1 == SUP_PLANE0:
@@ -1057,13 +1192,13 @@ def pack(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, pool_size, grade, Dg, goff
                     if w2 == SUP_PLANE0:
                         cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
                     bq = q_bucket(qz, qz0, qinv, nbk)
-                    q_push(bhead, CI, ohead, cc, bq, i)
-                    bmin = min(bmin, bq)
-                    hn += 1
+                    q_push(bhead[kz], CI, ohead, cc, bq, i)
+                    ZS[kz, ZBM] = min(ZS[kz, ZBM], bq)
+                    ZS[kz, ZHN] += 1
                     cnt[2] += 1
-    cnt[5] = n_initial
-    cnt[6] = npool
-    return X[:n].copy(), R[:n].copy(), DGL[:n].copy(), cnt
+    if grow:  # one zone (a radius law or a grading: their pool and draws are sequential)
+        MS[0], MS[1], MS[2] = npool, iseq, ifac
+    return status, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
 
 
 @njit(cache=True, inline="always")

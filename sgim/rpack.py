@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -530,6 +531,88 @@ def _throttled(progress, t0, every=5.0):
     return cb
 
 
+def _zones(region, G, mode, tol, X0, seeds):
+    """Zones for a parallel packing (see sgim/_rpack.py, zone_of), or None where one zone is used:
+    a radius law or a grading, spheres given beforehand, or a region too narrow to cut.
+
+    A sphere of radius r placed in half A, at least w from the cut, reads the grid cells (size c)
+    within 4 r of its centre, removes or relinks pockets within 6 r of it, puts new ones within
+    2 r and counts itself in its block of cells (4 c).  With w >= 6 r, 2 w - 4 r > c and 2 w > 4 c
+    none of it reaches a cell, block or pocket that B touches; w has a margin of 2 r.
+    Returns (ZG, zone sphere room, zone pocket room)."""
+    if mode != 0 or len(X0):
+        return None
+    r = float(G[5][0])  # one grid level, its largest radius: the radius
+    c = float(G[1][0])
+    ext = region.hi - region.lo
+    axis = 0 if ext[0] >= ext[1] else 1
+    w = max(6.0 * r, 2.0 * r + 0.5 * c, 2.0 * c) + 2.0 * r
+    if ext[axis] < 6.0 * w:
+        return None
+    cut = 0.5 * (region.lo[axis] + region.hi[axis])
+    zlo, zhi = region.lo[axis], region.hi[axis]
+    spans = [(zlo, cut - w), (cut + w, zhi), (cut - w, cut), (cut, cut + w)]
+    other = ext[1 - axis] + 2.0 * r
+    rho = 0.7405 / (4.0 / 3.0 * np.pi * (r * (1.0 - tol)) ** 3)  # no packing is denser (Kepler, Hales)
+    zcap, zccap = np.zeros(4, np.int64), np.zeros(4, np.int64)
+    ax_seed = seeds[:, axis]
+    for k, (a, b) in enumerate(spans):
+        vol = (b - a + 2.0 * r) * other * (ext[2] + 2.0 * r)
+        zcap[k] = int(1.1 * rho * vol) + 1024
+        nseed = int(np.count_nonzero((ax_seed >= a) & (ax_seed < b)))
+        zccap[k] = int(64.0 * (b - a + 2.0 * r) * other / r ** 2) + 4 * nseed + 65536
+    ZG = np.array([1.0, float(axis), cut, w])
+    return ZG, zcap, zccap
+
+
+def _pack_kernel(args, seeds, seed_r, X0, R0, cap0, zones, report):
+    """Run the pocket filler (sgim/_rpack.py): one zone in one thread, or the zones of a parallel
+    packing band by band (one queue bucket, 0.1 r, high: the order of the one-zone packing up to
+    the order within a bucket), A and B in two threads, then the strip.  Returns (X, R, Dist,
+    counters)."""
+    lo, hi, tol, G, Dc, exc, mode, rconst, rseq, grade, Dg, goff, discs, fseq = args
+    if zones is None:
+        ZG, zcap, zccap = np.zeros(4), np.zeros(4, np.int64), np.zeros(4, np.int64)
+    else:
+        ZG, zcap, zccap = zones
+    st = K.pack_init(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, POOL, grade, Dg, goff, discs, fseq,
+                     seeds, seed_r, X0, R0, cap0, ZG, zcap, zccap)
+    X_, R_, XR, DGL, DGH, nxt, FP, FPk, ohead, head, bcnt, CF, CI, cpl, freel = st[:15]  # fill may grow them
+    bhead, ZS, sbase, send, cbase, cend, CNT, MS, pool, qz0, qinv, n_initial, W0, W1 = st[15:]
+
+    def run(z0, z1, bz, budget, grow, W):
+        return K.fill(z0, z1, bz, budget, grow, args, X_, R_, XR, DGL, DGH, nxt, FP, FPk, ohead, head, bcnt, CF, CI,
+                      cpl, freel, bhead, ZS, ZG, sbase, send, cbase, cend, CNT, MS, pool, qz0, qinv, W)
+
+    if CNT[0, 8]:  # the seeds do not fit
+        pass
+    elif zones is None:
+        while True:
+            out = run(0, 0, bhead.shape[1], 50000, True, W0)
+            X_, R_, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel = out[1:]
+            if out[0] == K.ST_DONE:
+                break
+            if report:
+                report(int(ZS[:, K.ZSN].sum()), int(ZS[:, K.ZHN].sum()))
+    else:
+        with ThreadPoolExecutor(1) as pool_b:
+            while True:
+                lowest = K.lowest_bucket(ZS, bhead)
+                if lowest < 0:
+                    break
+                bz = lowest + 1
+                fb = pool_b.submit(run, 1, 1, bz, 1 << 62, False, W1)
+                sa = run(0, 0, bz, 1 << 62, False, W0)[0]
+                sb = fb.result()[0]
+                ss = run(2, 3, bz, 1 << 62, False, W0)[0]
+                if K.ST_FULL in (sa, sb, ss):
+                    CNT[0, 8] = 1
+                    break
+                if report:
+                    report(int(ZS[:, K.ZSN].sum()), int(ZS[:, K.ZHN].sum()))
+    return K.pack_finish(X_, R_, DGL, ZS, sbase, CNT, MS, n_initial)
+
+
 @dataclass
 class PackResult:
     centres: np.ndarray
@@ -538,10 +621,12 @@ class PackResult:
     timings: dict = field(default_factory=dict)
 
 
-def pack_region(region, spec, near=None, progress=None, cap=None, extra_seeds=None, X0=None, R0=None):
+def pack_region(region, spec, near=None, progress=None, cap=None, extra_seeds=None, X0=None, R0=None, parallel=True):
     """Pack the region; returns PackResult (statistics are added by pack_statistics).
 
-    With X0, R0 the spheres already there are kept and only extra_seeds start new growth."""
+    With X0, R0 the spheres already there are kept and only extra_seeds start new growth.  With
+    parallel, a constant radius in a region wide enough is packed in zones, two at a time (see
+    _zones); the result depends on the zones, not on the number of threads."""
     t0 = time.perf_counter()
     s_seed, s_rad, s_fac = np.random.SeedSequence(spec.seed).spawn(3)
     rng_seed, rng_rad, rng_fac = (np.random.default_rng(s) for s in (s_seed, s_rad, s_fac))
@@ -589,20 +674,23 @@ def pack_region(region, spec, near=None, progress=None, cap=None, extra_seeds=No
     if progress:
         progress(f"rpack: {len(seeds)} seeds on the floor of the region ({t_seed:.2f} s)")
     cap0 = cap or int(min(0.7 * vol_box / (4.0 / 3.0 * np.pi * rmin ** 3) + 1024, 4_000_000))
-    K.PROGRESS[0] = _throttled(progress, t0) if progress else None
+    report = _throttled(progress, t0) if progress else None
+    zones = _zones(region, G, mode, tol, X0, seeds) if parallel else None
     while True:
-        X, R, DG, cnt = K.pack(region.lo, region.hi, tol, G, region.Dc, region.exc, mode, rconst, rseq, POOL,
-                               grade, Dg, goff, discs, fseq, seeds, seed_r, X0, R0, cap0)
+        X, R, DG, cnt = _pack_kernel((region.lo, region.hi, tol, G, region.Dc, region.exc, mode, rconst, rseq,
+                                      grade, Dg, goff, discs, fseq), seeds, seed_r, X0, R0, cap0, zones, report)
+        if cnt[8]:  # a zone ran out of room (never seen): pack in one zone
+            zones = None
+            continue
         if mode == 1 and cnt[6] < POOL and len(rseq) >= POOL:
             # the radius sequence ran out before the region was full: draw a longer one (same prefix)
             rseq = law.sample(np.random.default_rng(s_rad), 2 * len(rseq))
             continue
         break
-    K.PROGRESS[0] = None
     t_pack = time.perf_counter() - t0 - t_seed
     counters = {"pockets_pushed": int(cnt[2]), "pops": int(cnt[0]), "pop_rejects": int(cnt[3]),
                 "seeds_placed": int(cnt[4]), "seeds": int(len(seeds)),
-                "pockets_covered": int(cnt[7])}
+                "pockets_covered": int(cnt[7]), "zones": 1 if zones is None else 4}
     if mode == 1:
         counters["radii_left_in_pool"] = int(cnt[6])
     res = PackResult(X, R, {"counters": counters}, {"seeds": t_seed, "pack": t_pack})

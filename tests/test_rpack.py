@@ -136,6 +136,108 @@ def test_density_of_a_larger_box_bulk():
     assert Q6 < 0.1
 
 
+# ---------------------------------------------------------------------------
+# zones: a constant radius in a wide region is packed by two threads (sgim/rpack.py, _zones)
+
+def slab_density(X, R, lo, hi, axis, edges, margin):
+    """Solid fraction of slabs [edges[k], edges[k+1]] across axis, centres at least margin from the
+    other walls, by the exact volume of each sphere between two planes (spherical caps)."""
+    other = [a for a in range(3) if a != axis]
+    keep = np.all((X[:, other] > lo[other] + margin) & (X[:, other] < hi[other] - margin), axis=1)
+    x, r = X[keep, axis], R[keep]
+
+    def below(h):  # volume of each sphere below the plane at h
+        t = np.clip(h - (x - r), 0.0, 2.0 * r)
+        return np.pi * t * t * (3.0 * r - t) / 3.0
+
+    area = np.prod(hi[other] - lo[other] - 2.0 * margin)
+    return np.array([(below(b) - below(a)).sum() / ((b - a) * area) for a, b in zip(edges[:-1], edges[1:])])
+
+
+@pytest.fixture(scope="module")
+def zoned_box():
+    reg = Region(np.zeros(3), np.array([64.0, 12.0, 12.0]))
+    spec = RandomSpec(seed=3, law=RadiusLaw("constant", {"radius": 0.5}))
+    return reg, spec, pack_region(reg, spec), pack_region(reg, spec, parallel=False)
+
+
+def test_zones_no_overlap_inside_and_as_dense_as_one_zone(zoned_box):
+    reg, spec, zoned, one = zoned_box
+    X, R = zoned.centres, zoned.radii
+    assert zoned.stats["counters"]["zones"] == 4 and one.stats["counters"]["zones"] == 1
+    assert brute_max_overlap(X, R) <= 1e-6
+    assert np.all(X - R[:, None] >= reg.lo - 1e-6 * R[:, None])
+    assert np.all(X + R[:, None] <= reg.hi + 1e-6 * R[:, None])
+    for a in range(3):  # spheres touch the floor and the side walls
+        assert np.sum(np.abs(X[:, a] - R) < 1e-9) > 20
+    assert abs(len(R) - len(one.radii)) < 0.003 * len(one.radii)
+    # slabs 2 m wide across the cut (x = 32; the strip is x in [28, 36]): no seam at the strip's
+    # edges or the cut, each slab within 0.02 of the one-zone packing's mean over the same slabs
+    edges = np.arange(4.0, 60.0 + 1e-9, 2.0)
+    dz = slab_density(X, R, reg.lo, reg.hi, 0, edges, 2.0)
+    d1 = slab_density(one.centres, one.radii, reg.lo, reg.hi, 0, edges, 2.0)
+    assert np.all(np.abs(dz - d1.mean()) < 0.02), dz
+    assert abs(dz.mean() - d1.mean()) < 0.004
+
+
+def test_zones_do_not_depend_on_threads(zoned_box, monkeypatch):
+    """The zones A and B are filled in one thread, one after the other: the same packing."""
+    import sgim.rpack as P
+
+    class Inline:
+        def __init__(self, n):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *a):
+            return False
+
+        def submit(self, fn, *args):
+            class Done:
+                def __init__(self, v):
+                    self.v = v
+
+                def result(self):
+                    return self.v
+            return Done(fn(*args))
+
+    reg, spec, zoned, _ = zoned_box
+    monkeypatch.setattr(P, "ThreadPoolExecutor", Inline)
+    again = pack_region(reg, spec)
+    assert np.array_equal(again.centres, zoned.centres) and np.array_equal(again.radii, zoned.radii)
+
+
+@pytest.mark.parametrize("short", ["spheres", "pockets"])
+def test_zone_out_of_room_packs_in_one_zone(zoned_box, monkeypatch, short):
+    import sgim.rpack as P
+
+    reg, spec, _, one = zoned_box
+    real = P._zones
+
+    def small(*a):  # room for the seeds, not for the packing
+        ZG, zcap, zccap = real(*a)
+        if short == "spheres":
+            return ZG, np.full(4, 500, np.int64), zccap
+        return ZG, zcap, np.full(4, 300, np.int64)
+
+    monkeypatch.setattr(P, "_zones", small)
+    res = pack_region(reg, spec)
+    assert res.stats["counters"]["zones"] == 1
+    assert np.array_equal(res.centres, one.centres)
+
+
+def test_zones_only_where_they_apply():
+    """A radius law, or a region narrower than six strip half widths: one zone."""
+    reg = Region(np.zeros(3), np.array([64.0, 12.0, 8.0]))
+    law = pack_region(reg, RandomSpec(seed=1, law=RadiusLaw("uniform", {"min": 0.4, "max": 0.6})))
+    assert law.stats["counters"]["zones"] == 1
+    narrow = pack_region(Region(np.zeros(3), np.array([22.0, 12.0, 8.0])),
+                         RandomSpec(seed=1, law=RadiusLaw("constant", {"radius": 0.5})))
+    assert narrow.stats["counters"]["zones"] == 1
+
+
 def test_largest_empty_sphere_matches_delaunay(equal_box):
     """Equal spheres: the largest hole away from the walls is at the Delaunay circumcentre with the
     largest circumradius; its radius is that circumradius minus r."""
