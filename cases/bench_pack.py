@@ -3,9 +3,12 @@
 What is measured
 ----------------
 1. Equal spheres in a box: about one million spheres (r = 0.5 in a 96 m cube; --quick: a 48 m
-   cube, about 125 000).  The packer's time (seeds + pocket filling, warm numba kernels, median of
-   the repeats) gives spheres/s, and its CPU time (the process's; the packer is single-threaded)
-   spheres per CPU second, which other work on a shared machine disturbs less; then the
+   cube, about 125 000).  A constant radius in a region this wide is packed in zones by two
+   threads (sgim/rpack.py, _zones); the same box packed in one zone, one thread, is the peer in
+   the same run (speed ratio; seam check: the solid fraction of 1 m slabs across the cut axis,
+   centres 2 m or more from the other walls, min / max / standard deviation for both).  The
+   packer's time (seeds + pocket filling, warm numba kernels, median of the repeats) gives
+   spheres/s, and its CPU time (the process's, both threads) spheres per CPU second; then the
    statistics of sgim/rpack.py: density (sphere volume / box volume), bulk density (spheres
    whose centre lies 4 r or more inside the box, over that inner box), mean coordination number
    at the bond tolerance 1e-3 (contact when |ci - cj| <= (ri + rj) (1 + 1e-3)), maximum overlap
@@ -78,7 +81,24 @@ def bulk_density(X, R, lo, hi, margin):
     return float(np.sum(4 / 3 * np.pi * R[inner] ** 3) / np.prod(hi - lo - 2 * margin))
 
 
-def box_case(L, law, repeats, seed=1, stats=True):
+def slab_profile(X, R, lo, hi, axis=0, width=1.0, margin=2.0):
+    """Solid fraction of slabs across axis (exact sphere volume between two planes), centres at
+    least margin from the other walls, slabs at least margin from the walls across axis."""
+    other = [a for a in range(3) if a != axis]
+    keep = np.all((X[:, other] > lo[other] + margin) & (X[:, other] < hi[other] - margin), axis=1)
+    x, r = X[keep, axis], R[keep]
+    edges = np.arange(lo[axis] + margin, hi[axis] - margin + 1e-9, width)
+
+    def below(h):
+        t = np.clip(h - (x - r), 0.0, 2.0 * r)
+        return np.pi * t * t * (3.0 * r - t) / 3.0
+
+    area = float(np.prod(hi[other] - lo[other] - 2.0 * margin))
+    d = np.array([(below(b) - below(a)).sum() / ((b - a) * area) for a, b in zip(edges[:-1], edges[1:])])
+    return {"min": float(d.min()), "max": float(d.max()), "sd": float(d.std()), "mean": float(d.mean())}
+
+
+def box_case(L, law, repeats, seed=1, stats=True, parallel=True):
     from sgim.rpack import RandomSpec, Region, pack_region, pack_statistics
 
     reg = Region(np.zeros(3), np.full(3, float(L)))
@@ -87,12 +107,14 @@ def box_case(L, law, repeats, seed=1, stats=True):
     res = None
     for k in range(repeats):
         t, c = time.perf_counter(), time.process_time()
-        res = pack_region(reg, spec)
+        res = pack_region(reg, spec, parallel=parallel)
         times.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
-        say(f"  box {L:g} m, {law.law}: {len(res.radii)} spheres in {times[-1]:.2f} s (cpu {cpu[-1]:.2f} s)")
+        say(f"  box {L:g} m, {law.law}, {res.stats['counters']['zones']} zone(s): {len(res.radii)} spheres in "
+            f"{times[-1]:.2f} s (cpu {cpu[-1]:.2f} s)")
     X, R = res.centres, res.radii
-    out = {"box_m": L, "law": law.meta(), "spheres": int(len(R)), "pack_s": times,
+    out = {"box_m": L, "law": law.meta(), "zones": res.stats["counters"]["zones"], "spheres": int(len(R)),
+           "slabs": slab_profile(X, R, reg.lo, reg.hi), "pack_s": times,
            "pack_s_median": statistics.median(times), "pack_cpu_s": cpu, "pack_cpu_s_median": statistics.median(cpu)}
     out["spheres_per_s"] = out["spheres"] / out["pack_s_median"]
     out["spheres_per_cpu_s"] = out["spheres"] / out["pack_cpu_s_median"]
@@ -106,15 +128,18 @@ def box_case(L, law, repeats, seed=1, stats=True):
 
 
 def table_boxes(rows):
-    hdr = ["case", "spheres", "pack time (s, median)", "spheres/s", "spheres per CPU s", "density", "bulk density",
-           "coordination (gap 1e-3)", "max overlap", "largest empty sphere r (x local r)", "statistics (s)"]
+    hdr = ["case", "zones", "spheres", "pack time (s, median)", "spheres/s", "spheres per CPU s", "density",
+           "bulk density", "1 m slabs min / max / sd", "coordination (gap 1e-3)", "max overlap",
+           "largest empty sphere r (x local r)", "statistics (s)"]
     out = []
     for name, c in rows:
         st = c.get("statistics", {})
         les = st.get("largest_empty_sphere") or {}
-        out.append([name, fint(c["spheres"]), f"{c['pack_s_median']:.2f}", fint(c["spheres_per_s"]),
+        sl = c["slabs"]
+        out.append([name, str(c["zones"]), fint(c["spheres"]), f"{c['pack_s_median']:.2f}", fint(c["spheres_per_s"]),
                     fint(c["spheres_per_cpu_s"]),
                     f"{st.get('density', float('nan')):.4f}", f"{c['bulk_density']:.4f}",
+                    f"{sl['min']:.4f} / {sl['max']:.4f} / {sl['sd']:.4f}",
                     f"{st.get('coordination', float('nan')):.3f}", f"{st.get('max_overlap', float('nan')):.1e}",
                     f"{les.get('radius', float('nan')):.3f} ({les.get('relative_max', float('nan')):.3f})",
                     f"{c.get('stats_s', float('nan')):.1f}"])
@@ -299,12 +324,16 @@ def main(argv=None):
         L = 48.0 if args.quick else 96.0
         reps = 3 if args.quick else 2
         say(f"1. equal spheres, {L:g} m cube")
-        eq = box_case(L, RadiusLaw("constant", {"radius": 0.5}), reps)
+        eq = box_case(L, RadiusLaw("constant", {"radius": 0.5}), reps + 1)
+        say(f"1'. equal spheres, {L:g} m cube, one zone (the peer)")
+        eq1 = box_case(L, RadiusLaw("constant", {"radius": 0.5}), reps, parallel=False)
         say(f"2. radius ratio 2, {L:g} m cube")
         r2 = box_case(L, RadiusLaw("uniform", {"min": 0.5, "max": 1.0}), reps)
-        results["equal"], results["ratio2"] = eq, r2
+        results["equal"], results["equal_one_zone"], results["ratio2"] = eq, eq1, r2
         print("## 1-2. Random dense packing in a box (r = 0.5; ratio 2: r uniform in [0.5, 1.0])\n")
-        print(table_boxes([("equal spheres", eq), ("radius ratio 2", r2)]))
+        print(table_boxes([("equal spheres", eq), ("equal spheres, one zone", eq1), ("radius ratio 2", r2)]))
+        print(f"\nZones against one zone: {eq1['pack_s_median'] / eq['pack_s_median']:.2f} x faster; "
+              f"density {eq['statistics']['density']:.4f} against {eq1['statistics']['density']:.4f}.")
         print(f"\nTargets: >= 200 000 spheres/s for one million equal spheres ({'met' if eq['spheres_per_s'] >= 2e5 else 'MISSED'}: "
               f"{fint(eq['spheres_per_s'])} spheres/s for {fint(eq['spheres'])}, "
               f"{fint(eq['spheres_per_cpu_s'])} per CPU second); density >= 0.58 for equal spheres "
