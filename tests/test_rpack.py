@@ -371,6 +371,38 @@ def test_sieve_curve_recovered():
 # ---------------------------------------------------------------------------
 # regions: fill shape, excavation, cavity (scene files)
 
+def test_core_sample_case():
+    """cases/core_sample.toml: a sieve-curve packing fills the closed cylinder of
+    cases/meshes/core_sample.obj to its surface, and the joint colours the spheres within 2 r."""
+    from sgim.build import build_model
+    from sgim.scene import dip_to_normal
+
+    scene = load_scene(ROOT / "cases" / "core_sample.toml")
+    m = build_model(scene)
+    X, R, C = m.centers, m.radii, m.colour
+    rc, h = 0.027, 0.135
+    assert len(R) > 10_000
+    assert brute_max_overlap(X, R) <= 1e-6
+    # inside the cylinder (the faceted surface lies inside the circle), touching it: the packing's
+    # bounding box is the cylinder's within one radius
+    assert np.all(np.hypot(X[:, 0], X[:, 1]) + R <= rc * (1 + 1e-9))
+    assert np.all(X[:, 2] - R >= -1e-6 * R) and np.all(X[:, 2] + R <= h + 1e-6 * R)
+    lo, hi = (X - R[:, None]).min(0), (X + R[:, None]).max(0)
+    assert np.all(np.abs(lo - [-rc, -rc, 0.0]) < R.max()) and np.all(np.abs(hi - [rc, rc, h]) < R.max())
+    # the sieve curve (percent passing by mass at each size)
+    mass = R ** 3
+    for size, p in zip([0.002, 0.0025, 0.00315, 0.004], [0.0, 25.0, 65.0, 100.0]):
+        assert 100 * mass[2 * R <= size * (1 + 1e-12)].sum() / mass.sum() == pytest.approx(p, abs=5.0)
+    # the joint (a disc wider than the core): green and blue are the spheres within 2 r of its
+    # plane, one colour on each side
+    d = (X - [0.0, 0.0, 0.0675]) @ dip_to_normal(60.0, 90.0)
+    assert np.array_equal(C >= 2, np.abs(d) <= 2 * R)
+    sides = {int(np.sign(d[C == k]).min() * np.sign(d[C == k]).max()) for k in (2, 3)}
+    assert sides == {1} and np.sign(d[C == 2][0]) != np.sign(d[C == 3][0])
+    st = m.meta["packing"]["statistics"]
+    assert 0.58 < st["density"] < 0.66 and 5.0 < st["coordination"] < 7.0
+
+
 def _ellipsoid_stl(path, c, ax, seg=40):
     from sgim import shapes
     import meshio
