@@ -734,7 +734,10 @@ def contact_pairs(X, R, tol, lo=None, hi=None, grid=None):
     return out, offsets
 
 
-def largest_empty_sphere(X, R, region, grid=None, probes_per_sphere=6, seed=0, local_radius=None):
+PROBES = 6  # clearance probes per sphere for the largest empty sphere
+
+
+def largest_empty_sphere(X, R, region, grid=None, probes_per_sphere=PROBES, seed=0, local_radius=None):
     """Largest sphere in the region clear of every packed sphere (see the module docstring).
 
     Returns dict(radius, relative (to the nearest sphere's radius, or to local_radius(centre)),
@@ -826,6 +829,8 @@ def pack_and_measure(region, spec, near=None, gap=1e-3, local_radius=None, progr
     res = pack_region(region, spec, near=near, progress=progress)
     X, R = res.centres, res.radii
     volume = region.volume()
+    if progress:
+        progress(f"rpack: statistics: contacts, overlaps, largest empty sphere ({PROBES * len(R)} probes)")
     stats = pack_statistics(X, R, region, volume, gap, seed=spec.seed, local_radius=local_radius)
     k = 0
     while k < rounds:
@@ -838,6 +843,8 @@ def pack_and_measure(region, spec, near=None, gap=1e-3, local_radius=None, progr
             break
         X, R = more.centres, more.radii
         res.timings["pack"] += more.timings["pack"]
+        if progress:
+            progress(f"rpack: a hole the growth did not reach, seeded: {len(R)} spheres; statistics again")
         stats = pack_statistics(X, R, region, volume, gap, seed=spec.seed, local_radius=local_radius)
     res.centres, res.radii = X, R
     stats["reseed_rounds"] = k
