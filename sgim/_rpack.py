@@ -59,7 +59,7 @@ SUP_PLANE1 = -21  # its second stored plane
 
 BLOCK = 4  # cells per block side (block counts of the level grid)
 BIG = 1e300
-DEEP = 0.5  # see the pair loop of pack()
+DEEP = 0.5  # see the pair loop of fill()
 PAD = 8  # vector length the neighbour loops are padded to
 PCAP = 16384  # pairs solved in one chunk (>= the neighbour cap, so one neighbour's pairs always fit)
 
