@@ -449,8 +449,11 @@ formats = ["npz"]
     assert meta["statistics"]["region_volume"] == pytest.approx(vol, rel=0.02)
 
 
-def test_excavation_and_cavity_scene(tmp_path):
-    """Excavation surface (exact rule) and a circular tunnel: every sphere is admissible by brute force."""
+@pytest.mark.parametrize("radii,zones", [('[packing.distribution]\nlaw = "uniform"\nmin = 0.3\nmax = 0.45', 1),
+                                          ("radius = 0.3", 4)], ids=["law", "zones"])
+def test_excavation_and_cavity_scene(tmp_path, radii, zones):
+    """Excavation surface (exact rule) and a circular tunnel: every sphere is admissible by brute force
+    (a radius law in one zone; a constant radius in zones, the surfaces crossing the strip)."""
     sys.path.insert(0, str(Path(__file__).parent))
     from sgim_ref import removed_mask
 
@@ -461,10 +464,7 @@ max = [16, 10, 12]
 [packing]
 kind = "random"
 seed = 2
-[packing.distribution]
-law = "uniform"
-min = 0.3
-max = 0.45
+""" + radii + """
 [[excavation]]
 name = "face"
 rule = "exact"
@@ -484,6 +484,7 @@ formats = ["npz"]
     model = build_model(scene)
     X, R = model.centers, model.radii
     assert len(X) > 1000
+    assert model.meta["packing"]["counters"]["zones"] == zones
     sc = scene.excavations[0]
     # the exact rule with each sphere's own radius (less the overlap tolerance 1e-6 r)
     assert not removed_mask(X, [(sc.vertices, sc.faces, "exact")], R * (1 - 2e-6)).any()
