@@ -1549,23 +1549,79 @@ def min_norm_hull(g, m, out):
     return math.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2])
 
 
+@njit(cache=True, inline="always")
+def _mix64(z):
+    """SplitMix64 finaliser: a well-mixed 64-bit value from a counter."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True, inline="always")
+def _unit(seed, i, j, c):
+    """Uniform in [0, 1) from the counter (seed, sphere i, probe j, coordinate c): the same value
+    on any machine and for any number of threads."""
+    z = _mix64(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(i) * np.uint64(0xD1B54A32D192ED03)
+               + np.uint64(4 * j + c) * np.uint64(0x8CB92BA72F3D8DD7) + np.uint64(1))
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True)
+def region_contains(lo, hi, Dc, exc, role, px, py, pz):
+    """Is the point in the region: the box, not above an excavation (exact rule), outside every
+    cavity (role 1) and inside the fill shape (role 2); excavation meshes (role 0) bound only
+    spheres of positive radius."""
+    if not (lo[0] <= px <= hi[0] and lo[1] <= py <= hi[1] and lo[2] <= pz <= hi[2]):
+        return False
+    ec, cstart, cfac, g0x, g0y, gs, gnx, gny = exc
+    if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, px, py, pz):
+        return False
+    for k in range(role.shape[0]):
+        if role[k] == 1 and MQ.in_root_box(Dc, k, px, py, pz, 0.0) and MQ.inside_point(Dc, k, px, py, pz):
+            return False
+        if role[k] == 2 and not (MQ.in_root_box(Dc, k, px, py, pz, 0.0) and MQ.inside_point(Dc, k, px, py, pz)):
+            return False
+    return True
+
+
 @njit(cache=True, parallel=True)
-def clearance_many(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi, Dc, exc, pts, search,
-                   use_mesh, Dnone, exc_none):
-    """Clearance of many points; where use_mesh[i] is 0 the surfaces are known to be farther than
-    the nearest sphere surface and are not queried (Dnone, exc_none: no meshes, no excavation)."""
-    out = np.empty(pts.shape[0])
-    near = np.empty(pts.shape[0], np.int64)
-    for i in prange(pts.shape[0]):
-        if use_mesh[i]:
-            c, j, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
-                                      Dc, exc, pts[i, 0], pts[i, 1], pts[i, 2], search, 0.0, None)
-        else:
-            c, j, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
-                                      Dnone, exc_none, pts[i, 0], pts[i, 1], pts[i, 2], search, 0.0, None)
-        out[i] = c
-        near[i] = j
-    return out, near
+def probe_best(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi, Dc, exc, role, near_s,
+               k, seed, shell, search, Dnone, exc_none):
+    """Largest-empty-sphere probes: k points per sphere, uniform in the shell r .. shell r around it
+    (directions uniform on the sphere, radii uniform in volume).  Probes of a sphere near a region
+    surface (near_s) are kept only inside the region and measured against the surfaces too;
+    the others are inside and nearer to a sphere than to any surface.  Returns, per sphere, its
+    best probe by clearance / radius of the nearest sphere: (score (-inf: none), point, nearest)."""
+    n = X.shape[0]
+    best = np.full(n, -np.inf)
+    pts = np.zeros((n, 3))
+    near = np.full(n, -1, np.int64)
+    s3 = shell ** 3 - 1.0
+    for i in prange(n):
+        for j in range(k):
+            z = 2.0 * _unit(seed, i, j, 0) - 1.0
+            ph = 2.0 * math.pi * _unit(seed, i, j, 1)
+            rad = R[i] * (1.0 + _unit(seed, i, j, 2) * s3) ** (1.0 / 3.0)
+            sxy = math.sqrt(max(1.0 - z * z, 0.0))
+            px = X[i, 0] + rad * sxy * math.cos(ph)
+            py = X[i, 1] + rad * sxy * math.sin(ph)
+            pz = X[i, 2] + rad * z
+            if near_s[i]:
+                if not region_contains(lo, hi, Dc, exc, role, px, py, pz):
+                    continue
+                c, jn, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
+                                           Dc, exc, px, py, pz, search, 0.0, None)
+            else:
+                c, jn, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
+                                           Dnone, exc_none, px, py, pz, search, 0.0, None)
+            if not c > 0.0:
+                continue
+            sc = c / R[max(jn, 0)]
+            if sc > best[i]:
+                best[i] = sc
+                pts[i, 0], pts[i, 1], pts[i, 2] = px, py, pz
+                near[i] = jn
+    return best, pts, near
 
 
 @njit(cache=True, parallel=True)

@@ -48,8 +48,10 @@ Reported statistics (``pack_statistics``; in the model's ``meta["packing"]["stat
 * largest empty sphere: the largest sphere inside the region that overlaps no packed sphere.
   Its centre is a local maximum of the clearance (distance to the nearest sphere surface, box
   face or region surface).  Estimated by probing: 6 probe points per sphere, uniform in the
-  shell between r and 1.8 r around its centre, scored by their clearance; from the
-  1000 + n/1000 best, a steepest ascent of the clearance (direction: the point of smallest
+  shell between r and 1.8 r around its centre (drawn from a counter-based generator: the same
+  points for any number of threads), scored by their clearance over the nearest sphere's
+  radius, one kernel pass keeping each sphere's best; from the 1000 + n/1000 best of those, a
+  steepest ascent of the clearance (direction: the point of smallest
   norm in the convex hull of the unit directions away from the nearest constraints; it stops
   at a point equidistant from four constraints, a vertex of the Voronoi diagram for equal
   spheres).  Reported: its radius, the radius relative to the local sphere radius (the radius
@@ -747,38 +749,31 @@ def largest_empty_sphere(X, R, region, grid=None, probes_per_sphere=PROBES, seed
         return {"radius": None, "relative": None, "centre": None, "probes": 0}
     G, head, nxt, bcnt = grid or sphere_grid(X, R, region.lo, region.hi)
     a = _gargs(G, head, nxt, bcnt)
-    rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(4)[3])
     k = probes_per_sphere
-    d = rng.normal(size=(n * k, 3))
-    d /= np.linalg.norm(d, axis=1)[:, None]
-    u = rng.random(n * k)
-    rad = np.repeat(R, k) * (1.0 + u * (SHELL ** 3 - 1.0)) ** (1.0 / 3.0)  # uniform in the shell r .. SHELL r
-    pts = np.repeat(X, k, axis=0) + d * rad[:, None]
-    use = np.zeros(len(pts), np.uint8)
+    near_s = np.zeros(n, np.uint8)
     if region.n_meshes:
         # a probe of a sphere 2 SHELL r or more from every surface is inside the region and nearer to
         # that sphere's surface than to any surface: no surface query for it
         far = (2.0 * SHELL - 1.0) * R
-        near_s = np.isfinite(K.mesh_distance_many(region.Dc, np.ascontiguousarray(X), far))
+        near_b = np.isfinite(K.mesh_distance_many(region.Dc, np.ascontiguousarray(X), far))
         if region.exc[6] > 0:
-            near_s |= _above_many(region.exc, X + np.array([0.0, 0.0, 1.0]) * far[:, None])
-        use = np.repeat(near_s, k).astype(np.uint8)
-        keep = np.ones(len(pts), bool)
-        idx = np.nonzero(use)[0]
-        keep[idx] = region.contains(pts[idx])
-        pts, use = pts[keep], use[keep]
+            near_b |= _above_many(region.exc, X + np.array([0.0, 0.0, 1.0]) * far[:, None])
+        near_s = near_b.astype(np.uint8)
+    role = np.array([0] * len(region.exc_meshes) + [1] * len(region.cavities) + [2] * (region.fill is not None),
+                    np.int64)
     search = 4.0 * float(R.max())
-    c, near = K.clearance_many(X, R, *a, region.lo, region.hi, region.Dc, region.exc, np.ascontiguousarray(pts),
-                               search, use, empty_mesh_data(), _NO_EXC)
-    ok = c > 0
-    pts, c, near = pts[ok], c[ok], near[ok]
-    if len(c) == 0:
+    pseed = int(np.random.SeedSequence(seed).generate_state(1, np.uint64)[0] >> np.uint64(1))
+    score, pts, near = K.probe_best(X, R, *a, region.lo, region.hi, region.Dc, region.exc, role, near_s, k, pseed,
+                                    SHELL, search, empty_mesh_data(), _NO_EXC)
+    ok = np.nonzero(np.isfinite(score))[0]
+    if len(ok) == 0:
         return {"radius": 0.0, "relative": 0.0, "centre": None, "probes": int(n * k)}
-    loc = R[np.maximum(near, 0)]
-    score = c / loc
-    top = np.argsort(-score, kind="stable")[: 1000 + n // 1000]
+    m = min(1000 + n // 1000, len(ok))
+    top = ok[np.argpartition(-score[ok], m - 1)[:m]]
+    top = top[np.lexsort((top, -score[top]))]  # best first, ties by sphere
+    loc = R[np.maximum(near[top], 0)]
     cl, pos, nr = K.ascend_many(X, R, *a, region.lo, region.hi, region.Dc, region.exc,
-                                np.ascontiguousarray(pts[top]), search, loc[top], 200)
+                                np.ascontiguousarray(pts[top]), search, loc, 200)
     rl = R[np.maximum(nr, 0)] if local_radius is None else local_radius(pos)
     rel = cl / rl
     b = int(np.argmax(cl))
