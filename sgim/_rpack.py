@@ -1434,15 +1434,22 @@ def clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcn
         if best <= rho or rho >= search:
             break
         rho *= 2.0
+    best = surface_clearance(Dc, px, py, pz, best)
+    if gbuf is None:
+        return best, bj, 0
+    return _active_dirs(X, R, org, cs, dims, coff, rmax, lo, hi, head, nxt, Dc, px, py, pz, best, bj, eps, gbuf)
+
+
+@njit(cache=True)
+def surface_clearance(Dc, px, py, pz, best):
+    """min(best, distance from P to the meshes of Dc)."""
     for k in range(Dc[12].shape[0]):
         if not MQ.in_root_box(Dc, k, px, py, pz, best):
             continue
         d2 = MQ.closest_point(Dc, k, px, py, pz, best * best)[0]
         if d2 < best * best:
             best = math.sqrt(d2)
-    if gbuf is None:
-        return best, bj, 0
-    return _active_dirs(X, R, org, cs, dims, coff, rmax, lo, hi, head, nxt, Dc, px, py, pz, best, bj, eps, gbuf)
+    return best
 
 
 @njit(cache=True)
@@ -1606,21 +1613,21 @@ def probe_best(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo
             px = X[i, 0] + rad * sxy * math.cos(ph)
             py = X[i, 1] + rad * sxy * math.sin(ph)
             pz = X[i, 2] + rad * z
+            # the spheres and the box first: the surfaces can only lower the clearance, so a probe
+            # that does not beat the sphere's best so far needs no surface query
+            c, jn, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
+                                       Dnone, exc_none, px, py, pz, search, 0.0, None)
+            if not c > 0.0 or c / R[max(jn, 0)] <= best[i]:
+                continue
             if near_s[i]:
                 if not region_contains(lo, hi, Dc, exc, role, px, py, pz):
                     continue
-                c, jn, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
-                                           Dc, exc, px, py, pz, search, 0.0, None)
-            else:
-                c, jn, m = clearance_point(X, R, org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt, lo, hi,
-                                           Dnone, exc_none, px, py, pz, search, 0.0, None)
-            if not c > 0.0:
-                continue
-            sc = c / R[max(jn, 0)]
-            if sc > best[i]:
-                best[i] = sc
-                pts[i, 0], pts[i, 1], pts[i, 2] = px, py, pz
-                near[i] = jn
+                c = surface_clearance(Dc, px, py, pz, c)
+                if not c > 0.0 or c / R[max(jn, 0)] <= best[i]:
+                    continue
+            best[i] = c / R[max(jn, 0)]
+            pts[i, 0], pts[i, 1], pts[i, 2] = px, py, pz
+            near[i] = jn
     return best, pts, near
 
 
