@@ -511,6 +511,31 @@ def _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow):
 
 
 @njit(cache=True, inline="always")
+def _push_pocket(qx, qy, qz, rn, i, s1, s2, snx, sny, snz, sh, ZG, ZS, cbase, cend, CF, CI, cpl, freel, grow, bhead,
+                 ohead, qz0, qinv, cnt):
+    """Queue the pocket (q, rn) made by sphere i with supports s1, s2 (spheres, walls, or the
+    stored plane (sn, sh) when s2 is SUP_PLANE0) in the zone of q.  Returns (slot or -1 when the
+    zone is full, the arrays, grown when grow)."""
+    kz = zone_of(ZG, qx, qy)
+    cc, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
+    if cc < 0:
+        return cc, CF, CI, cpl, freel
+    CI[cc, 9] = kz
+    CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
+    CF[cc, 3] = rn
+    CI[cc, 3] = i + 1
+    CI[cc, 0], CI[cc, 1], CI[cc, 2] = i, s1, s2
+    if s2 == SUP_PLANE0:
+        cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
+    bq = q_bucket(qz, qz0, qinv, bhead.shape[1])
+    q_push(bhead[kz], CI, ohead, cc, bq, i)
+    ZS[kz, ZBM] = min(ZS[kz, ZBM], bq)
+    ZS[kz, ZHN] += 1
+    cnt[2] += 1
+    return cc, CF, CI, cpl, freel
+
+
+@njit(cache=True, inline="always")
 def _free_cand(c, ZS, cbase, CI, freel):
     kz = CI[c, 9]
     freel[cbase[kz] + ZS[kz, ZNF]] = c
@@ -728,7 +753,6 @@ def fill(z0, z1, bz, budget, grow, args, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead
     has_mesh = Dc[12].shape[0] > 0
     check_region = has_mesh or gnx > 0
     tiny_tol = tol < 1e-9
-    nbk = bhead.shape[1]
     nbcap = nb.shape[0]
     cnt = CNT[z0]
     npool, iseq, ifac = MS[0], MS[1], MS[2]
@@ -1094,20 +1118,11 @@ def fill(z0, z1, bz, budget, grow, args, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead
                     if check_region and not _region_ok(qx, qy, qz, rn, tol, has_mesh, Dc, ec, cstart, cfac, g0x,
                                                        g0y, gs, gnx, gny):
                         continue
-                    kz = zone_of(ZG, qx, qy)
-                    cc, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
+                    cc, CF, CI, cpl, freel = _push_pocket(qx, qy, qz, rn, i, nb[a], nb[b], 0.0, 0.0, 0.0, 0.0, ZG, ZS,
+                                                          cbase, cend, CF, CI, cpl, freel, grow, bhead, ohead, qz0,
+                                                          qinv, cnt)
                     if cc < 0:
                         return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
-                    CI[cc, 9] = kz
-                    CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
-                    CF[cc, 3] = rn
-                    CI[cc, 3] = i + 1
-                    CI[cc, 0], CI[cc, 1], CI[cc, 2] = i, nb[a], nb[b]
-                    bq = q_bucket(qz, qz0, qinv, nbk)
-                    q_push(bhead[kz], CI, ohead, cc, bq, i)
-                    ZS[kz, ZBM] = min(ZS[kz, ZBM], bq)
-                    ZS[kz, ZHN] += 1
-                    cnt[2] += 1
         # (S, A, plane) and (S, plane, plane)
         for p in range(npl):
             nx_, ny_, nz_, h0 = pl[p, 0], pl[p, 1], pl[p, 2], pl[p, 3]
@@ -1135,23 +1150,11 @@ def fill(z0, z1, bz, budget, grow, args, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead
                             continue
                         if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, qx, qy, qz):
                             continue
-                    kz = zone_of(ZG, qx, qy)
-                    cc, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
+                    cc, CF, CI, cpl, freel = _push_pocket(qx, qy, qz, rn, i, nb[a], plid[p], snx, sny, snz, sh, ZG,
+                                                          ZS, cbase, cend, CF, CI, cpl, freel, grow, bhead, ohead, qz0,
+                                                          qinv, cnt)
                     if cc < 0:
                         return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
-                    CI[cc, 9] = kz
-                    CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
-                    CF[cc, 3] = rn
-                    CI[cc, 3] = i + 1
-                    CI[cc, 0], CI[cc, 1] = i, nb[a]
-                    CI[cc, 2] = plid[p]
-                    if plid[p] == SUP_PLANE0:
-                        cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
-                    bq = q_bucket(qz, qz0, qinv, nbk)
-                    q_push(bhead[kz], CI, ohead, cc, bq, i)
-                    ZS[kz, ZBM] = min(ZS[kz, ZBM], bq)
-                    ZS[kz, ZHN] += 1
-                    cnt[2] += 1
             for p2 in range(p + 1, npl):
                 if (plid[p] == SUP_PLANE0 and plid[p2] == SUP_PLANE0) or plown[p] >= 0 or plown[p2] >= 0:
                     continue
@@ -1176,26 +1179,14 @@ def fill(z0, z1, bz, budget, grow, args, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead
                             continue
                         if gnx > 0 and above_excavation(ec, cstart, cfac, g0x, g0y, gs, gnx, gny, qx, qy, qz):
                             continue
-                    kz = zone_of(ZG, qx, qy)
-                    cc, CF, CI, cpl, freel = _alloc_cand(kz, ZS, cbase, cend, CF, CI, cpl, freel, grow)
-                    if cc < 0:
-                        return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
-                    CI[cc, 9] = kz
-                    CF[cc, 0], CF[cc, 1], CF[cc, 2] = qx, qy, qz
-                    CF[cc, 3] = rn
-                    CI[cc, 3] = i + 1
                     # a wall first, then the other support (a wall or the stored plane)
                     w1, w2 = plid[p], plid[p2]
                     if w1 == SUP_PLANE0:
                         w1, w2 = w2, w1
-                    CI[cc, 0], CI[cc, 1], CI[cc, 2] = i, w1, w2
-                    if w2 == SUP_PLANE0:
-                        cpl[cc, 0], cpl[cc, 1], cpl[cc, 2], cpl[cc, 3] = snx, sny, snz, sh
-                    bq = q_bucket(qz, qz0, qinv, nbk)
-                    q_push(bhead[kz], CI, ohead, cc, bq, i)
-                    ZS[kz, ZBM] = min(ZS[kz, ZBM], bq)
-                    ZS[kz, ZHN] += 1
-                    cnt[2] += 1
+                    cc, CF, CI, cpl, freel = _push_pocket(qx, qy, qz, rn, i, w1, w2, snx, sny, snz, sh, ZG, ZS, cbase,
+                                                          cend, CF, CI, cpl, freel, grow, bhead, ohead, qz0, qinv, cnt)
+                    if cc < 0:
+                        return ST_FULL, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
     if grow:  # one zone (a radius law or a grading: their pool and draws are sequential)
         MS[0], MS[1], MS[2] = npool, iseq, ifac
     return status, X, R, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel
