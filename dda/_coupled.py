@@ -28,7 +28,7 @@ from ._broad import _hash
 from ._contact import point_force
 from ._deform import add_strain_force, body_point, deform_geometry, point_velocity
 from ._integrate import _omega, quat_matrix, run_chunk, update_geometry
-from ._spheres import _cell_hash, _contact, _hkey, _joints, bond_lookup, closest_on_polyhedron
+from ._spheres import _cell_hash, _contact, _hkey, _joints, advance_sphere, bond_lookup, closest_on_polyhedron
 
 OK, NEED_CAPACITY, BLOWUP, NEED_BLOCK_CAPACITY = 0, 1, 2, 3
 
@@ -452,33 +452,9 @@ def sphere_update(dt, dt_prev, gravity, local_damp, x, v, w, m, inertia, fixed, 
     for i in range(n):
         if fixed[i]:
             continue
-        if kin[i]:
-            acc[0] -= dt * (force[i, 0] * v[i, 0] + force[i, 1] * v[i, 1] + force[i, 2] * v[i, 2]
-                            + torque[i, 0] * w[i, 0] + torque[i, 1] * w[i, 1] + torque[i, 2] * w[i, 2])
-            for a in range(3):
-                x[i, a] += dt * v[i, a]
-            continue
-        for a in range(3):
-            f = force[i, a] + m[i] * gravity[a] + bforce[i, a]
-            tq = torque[i, a]
-            if local_damp > 0.0:
-                if v[i, a] != 0.0:
-                    fd = local_damp * abs(f) * (1.0 if v[i, a] > 0 else -1.0)
-                    f -= fd
-                    d_loc += fd * v[i, a] * dtavg
-                if w[i, a] != 0.0:
-                    td = local_damp * abs(tq) * (1.0 if w[i, a] > 0 else -1.0)
-                    tq -= td
-                    d_loc += td * w[i, a] * dtavg
-            vn_ = v[i, a] + dtavg * f / m[i]
-            wn_ = w[i, a] + dtavg * tq / inertia[i]
-            ke += 0.5 * m[i] * v[i, a] * vn_ + 0.5 * inertia[i] * w[i, a] * wn_
-            pe -= (m[i] * gravity[a] + bforce[i, a]) * x[i, a]
-            v[i, a] = vn_
-            w[i, a] = wn_
-            x[i, a] += dt * vn_
-            if not np.isfinite(x[i, a]) or not np.isfinite(vn_) or not np.isfinite(wn_):
-                ok = False
+        ke, pe, d_loc, step_ok = advance_sphere(i, dt, dtavg, gravity, local_damp, x, v, w, m, inertia, kin, bforce,
+                                                force, torque, acc, ke, pe, d_loc)
+        ok &= step_ok
     energy[0] = ke
     energy[1] = pe - acc[0]
     energy[2] = res[0] + res[3]

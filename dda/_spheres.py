@@ -403,6 +403,45 @@ def _list_broken(i, j, fixed, kin, nl_pairs, nl_n, ncap, nl_flag):
         nl_flag[0] = 1
 
 
+@njit(cache=True, inline="always")
+def advance_sphere(i, dt, dtavg, gravity, local_damp, X, V, W, m, inertia, kin, bforce, force, torque, acc,
+                   ke, pe, d_loc):
+    """Central difference of sphere i (not fixed): a kinematic sphere moves at its prescribed
+    velocity and the work of the forces on it goes to acc[0]; otherwise force + gravity + body
+    force, with local (Cundall) damping, updates its velocities (dtavg, the mean of the last two
+    steps) and its position (dt).  Adds its kinetic and potential energy and the damping work to
+    ke, pe, d_loc; returns them and False on a non-finite state."""
+    ok = True
+    if kin[i]:
+        acc[0] -= dt * (force[i, 0] * V[i, 0] + force[i, 1] * V[i, 1] + force[i, 2] * V[i, 2]
+                        + torque[i, 0] * W[i, 0] + torque[i, 1] * W[i, 1] + torque[i, 2] * W[i, 2])
+        for a in range(3):
+            X[i, a] += dt * V[i, a]
+        return ke, pe, d_loc, ok
+    for a in range(3):
+        f = force[i, a] + m[i] * gravity[a] + bforce[i, a]
+        tq = torque[i, a]
+        if local_damp > 0.0:
+            if V[i, a] != 0.0:
+                fd = local_damp * abs(f) * (1.0 if V[i, a] > 0 else -1.0)
+                f -= fd
+                d_loc += fd * V[i, a] * dtavg
+            if W[i, a] != 0.0:
+                td = local_damp * abs(tq) * (1.0 if W[i, a] > 0 else -1.0)
+                tq -= td
+                d_loc += td * W[i, a] * dtavg
+        vn_ = V[i, a] + dtavg * f / m[i]
+        wn_ = W[i, a] + dtavg * tq / inertia[i]
+        ke += 0.5 * m[i] * V[i, a] * vn_ + 0.5 * inertia[i] * W[i, a] * wn_
+        pe -= (m[i] * gravity[a] + bforce[i, a]) * X[i, a]
+        V[i, a] = vn_
+        W[i, a] = wn_
+        X[i, a] += dt * vn_
+        if not np.isfinite(X[i, a]) or not np.isfinite(vn_) or not np.isfinite(wn_):
+            ok = False
+    return ke, pe, d_loc, ok
+
+
 @njit(cache=True, fastmath=SAFE_FAST)
 def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
                 x, v, w, r, m, inertia, fixed, kin, bforce, lawrow, wall_lawrow,
@@ -760,33 +799,9 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
         for i in range(n):
             if fixed[i]:
                 continue
-            if kin[i]:
-                acc[0] -= dt * (force[i, 0] * V[i, 0] + force[i, 1] * V[i, 1] + force[i, 2] * V[i, 2]
-                                + torque[i, 0] * W[i, 0] + torque[i, 1] * W[i, 1] + torque[i, 2] * W[i, 2])
-                for a in range(3):
-                    X[i, a] += dt * V[i, a]
-            else:
-                for a in range(3):
-                    f = force[i, a] + m[i] * gravity[a] + bforce[i, a]
-                    tq = torque[i, a]
-                    if local_damp > 0.0:
-                        if V[i, a] != 0.0:
-                            fd = local_damp * abs(f) * (1.0 if V[i, a] > 0 else -1.0)
-                            f -= fd
-                            d_loc += fd * V[i, a] * dtavg
-                        if W[i, a] != 0.0:
-                            td = local_damp * abs(tq) * (1.0 if W[i, a] > 0 else -1.0)
-                            tq -= td
-                            d_loc += td * W[i, a] * dtavg
-                    vn_ = V[i, a] + dtavg * f / m[i]
-                    wn_ = W[i, a] + dtavg * tq / inertia[i]
-                    ke += 0.5 * m[i] * V[i, a] * vn_ + 0.5 * inertia[i] * W[i, a] * wn_
-                    pe -= (m[i] * gravity[a] + bforce[i, a]) * X[i, a]
-                    V[i, a] = vn_
-                    W[i, a] = wn_
-                    X[i, a] += dt * vn_
-                    if not np.isfinite(X[i, a]) or not np.isfinite(vn_) or not np.isfinite(wn_):
-                        blown = True
+            ke, pe, d_loc, ok = advance_sphere(i, dt, dtavg, gravity, local_damp, X, V, W, m, inertia, kin, bforce,
+                                               force, torque, acc, ke, pe, d_loc)
+            blown |= not ok
             e0 = X[i, 0] - x_ref[i, 0]
             e1 = X[i, 1] - x_ref[i, 1]
             e2 = X[i, 2] - x_ref[i, 2]
