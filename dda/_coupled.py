@@ -28,7 +28,8 @@ from ._broad import _hash
 from ._contact import point_force
 from ._deform import add_strain_force, body_point, deform_geometry, point_velocity
 from ._integrate import _omega, quat_matrix, run_chunk, update_geometry
-from ._spheres import _cell_hash, _contact, _hkey, _joints, advance_sphere, bond_lookup, closest_on_polyhedron
+from ._spheres import (_cell_hash, _contact, _hkey, _joints, advance_sphere, bond_lookup, closest_on_polyhedron,
+                       pair_meff)
 
 OK, NEED_CAPACITY, BLOWUP, NEED_BLOCK_CAPACITY = 0, 1, 2, 3
 
@@ -186,9 +187,7 @@ def _bonds(dt, t, x, v, w, r, m, fixed, kin, bi, bj, b_len0, b_kn, b_ks, b_ft, b
         cdn = 0.0
         cds = 0.0
         if b_zeta[k] > 0.0:
-            si = fixed[i] or kin[i]
-            sj = fixed[j] or kin[j]
-            meff = m[j] if si and not sj else (m[i] if sj and not si else m[i] * m[j] / (m[i] + m[j]))
+            meff = pair_meff(i, j, m, fixed, kin)
             cdn = 2.0 * b_zeta[k] * np.sqrt(b_kn[k] * meff)
             cds = 2.0 * b_zeta[k] * np.sqrt(b_ks[k] * meff)
             res[2] += (cdn * vn * vn + cds * ((vr0 - vn * nx) ** 2 + (vr1 - vn * ny) ** 2

@@ -49,6 +49,19 @@ OK, NEED_CAPACITY, BLOWUP, NEED_PAIRS = 0, 1, 2, 3
 SAFE_FAST = {"contract", "reassoc", "nsz", "arcp"}
 
 
+@njit(cache=True, inline="always")
+def pair_meff(i, j, m, fixed, kin):
+    """Effective mass of the pair (i, j) for viscous damping: the free sphere's mass when the other
+    is fixed or kinematic, else m_i m_j / (m_i + m_j)."""
+    si = fixed[i] or kin[i]
+    sj = fixed[j] or kin[j]
+    if si and not sj:
+        return m[j]
+    if sj and not si:
+        return m[i]
+    return m[i] * m[j] / (m[i] + m[j])
+
+
 @njit(cache=True)
 def _hkey(key, mask):
     h = key * np.int64(0x9E3779B97F4A7C15 & 0x7FFFFFFFFFFFFFFF)
@@ -201,14 +214,7 @@ def _contact(i, j, is_wall, key, depth, nx, ny, nz, px, py, pz, x, v, w, m, fixe
         vrel[0] -= v[i, 0] + w[i, 1] * ri2 - w[i, 2] * ri1
         vrel[1] -= v[i, 1] + w[i, 2] * ri0 - w[i, 0] * ri2
         vrel[2] -= v[i, 2] + w[i, 0] * ri1 - w[i, 1] * ri0
-        si = fixed[i] or kin[i]
-        sj = fixed[j] or kin[j]
-        if si and not sj:
-            meff = m[j]
-        elif sj and not si:
-            meff = m[i]
-        else:
-            meff = m[i] * m[j] / (m[i] + m[j])
+        meff = pair_meff(i, j, m, fixed, kin)
     f = np.empty(3)
     st, bnd, fn_el, ee, df, dd = point_force(lawrow[0], lawrow[1], lawrow[2], 0.0, 0.0, lawrow[5], meff, depth, n,
                                              vrel, dt, us, False, f)
@@ -362,14 +368,7 @@ def _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_in
             vrel[a] = v[j, a] - v[i, a]
             us[a] = j_us[k, a]
         vn = vrel[0] * n[0] + vrel[1] * n[1] + vrel[2] * n[2]
-        si = fixed[i] or kin[i]
-        sj = fixed[j] or kin[j]
-        if si and not sj:
-            meff = m[j]
-        elif sj and not si:
-            meff = m[i]
-        else:
-            meff = m[i] * m[j] / (m[i] + m[j])
+        meff = pair_meff(i, j, m, fixed, kin)
         st, bnd, fn_el, ee, df, dd = point_force(lawrow[0], lawrow[1], j_tan[k], 0.0, 0.0, lawrow[5], meff, depth,
                                                  n, vrel, dt, us, False, f)
         res[0] += ee
@@ -692,9 +691,7 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
             # force on j: -fn n - ks u (+ viscous damping on the normal and shear relative velocity)
             cdn = 0.0
             if BB[k, 5] > 0.0:
-                si = fixed[i] or kin[i]
-                sj = fixed[j] or kin[j]
-                meff = m[j] if si and not sj else (m[i] if sj and not si else m[i] * m[j] / (m[i] + m[j]))
+                meff = pair_meff(i, j, m, fixed, kin)
                 cdn = 2.0 * BB[k, 5] * np.sqrt(BB[k, 1] * meff)
                 cds = 2.0 * BB[k, 5] * np.sqrt(BB[k, 2] * meff)
                 res[2] += (cdn * vn * vn + cds * ((vr0 - vn * nx) ** 2 + (vr1 - vn * ny) ** 2
@@ -769,9 +766,7 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
             if cdamped and czeta[q] > 0.0:
                 inv = 1.0 / dl
                 vn = ((V[j, 0] - V[i, 0]) * d0 + (V[j, 1] - V[i, 1]) * d1 + (V[j, 2] - V[i, 2]) * d2) * inv
-                si = fixed[i] or kin[i]
-                sj = fixed[j] or kin[j]
-                meff = m[j] if si and not sj else (m[i] if sj and not si else m[i] * m[j] / (m[i] + m[j]))
+                meff = pair_meff(i, j, m, fixed, kin)
                 cdn = 2.0 * czeta[q] * np.sqrt(CB[q, 1] * meff)
                 res[2] += cdn * vn * vn * dt
                 s += cdn * vn
