@@ -29,7 +29,7 @@ from ._contact import point_force
 from ._deform import add_strain_force, body_point, deform_geometry, point_velocity
 from ._integrate import _omega, quat_matrix, run_chunk, update_geometry
 from ._spheres import (_cell_hash, _contact, _hkey, _joints, advance_sphere, bond_lookup, closest_on_polyhedron,
-                       pair_meff)
+                       hashed_cells, pair_meff)
 
 OK, NEED_CAPACITY, BLOWUP, NEED_BLOCK_CAPACITY = 0, 1, 2, 3
 
@@ -252,28 +252,8 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
     for i in range(n):
         rmax = max(rmax, r[i])
     S = 2.0 * rmax * 1.0001
-    nbk = 16
-    while nbk < 2 * n:
-        nbk *= 2
-    cmask = nbk - 1
-    count = np.zeros(nbk + 1, np.int64)
-    entries = np.empty(n, np.int64)
-    fill = np.empty(nbk, np.int64)
-    cell = np.empty(n, np.int64)
-    cix = np.empty((n, 3), np.int64)
+    cmask, count, entries, cix = hashed_cells(x, S)
     seen = np.empty(27, np.int64)
-    for i in range(n):
-        for a in range(3):
-            cix[i, a] = np.int64(np.floor(x[i, a] / S))
-        cell[i] = _cell_hash(cix[i, 0], cix[i, 1], cix[i, 2], cmask)
-        count[cell[i] + 1] += 1
-    for q in range(nbk):
-        count[q + 1] += count[q]
-    for q in range(nbk):
-        fill[q] = count[q]
-    for i in range(n):
-        entries[fill[cell[i]]] = i
-        fill[cell[i]] += 1
     old = cur[0]
     new = 1 - old
     nold = c_n[old]

@@ -245,18 +245,11 @@ def _contact(i, j, is_wall, key, depth, nx, ny, nz, px, py, pz, x, v, w, m, fixe
 
 
 @njit(cache=True)
-def build_pairs(x, r, fixed, kin, skin, bstart, bnbr, bidx, b_intact, jkey_tab, jkey_slot, njoint, out):
-    """Verlet pair list: every pair i < j closer than r_i + r_j + skin, except pairs of two fixed or prescribed
-    spheres, pairs with an intact bond and smooth-joint pairs (both handled by their own loops). Hashed grid of
-    cells 2 r_max + skin (counting sort, linear in the spheres; a candidate counts only from its own cell, so
-    buckets shared by several cells need no bookkeeping). Bonds of sphere i: bnbr[bstart[i]:bstart[i + 1]]
-    (partners j > i, bond indices bidx). Writes up to len(out) pairs; returns the number of pairs found (more
-    than len(out): the caller grows `out` and calls again)."""
+def hashed_cells(x, S):
+    """Counting sort of the spheres into hashed cells of size S (twice as many buckets as spheres,
+    a power of two): (mask of the hash, bucket starts count (nbk + 1), entries (the spheres bucket
+    by bucket), cix (the integer cell of each sphere))."""
     n = x.shape[0]
-    rmax = 0.0
-    for i in range(n):
-        rmax = max(rmax, r[i])
-    S = (2.0 * rmax + skin) * 1.0001
     nbk = 16
     while nbk < 2 * n:
         nbk *= 2
@@ -278,6 +271,23 @@ def build_pairs(x, r, fixed, kin, skin, bstart, bnbr, bidx, b_intact, jkey_tab, 
     for i in range(n):
         entries[fill[cell[i]]] = i
         fill[cell[i]] += 1
+    return cmask, count, entries, cix
+
+
+@njit(cache=True)
+def build_pairs(x, r, fixed, kin, skin, bstart, bnbr, bidx, b_intact, jkey_tab, jkey_slot, njoint, out):
+    """Verlet pair list: every pair i < j closer than r_i + r_j + skin, except pairs of two fixed or prescribed
+    spheres, pairs with an intact bond and smooth-joint pairs (both handled by their own loops). Hashed grid of
+    cells 2 r_max + skin (counting sort, linear in the spheres; a candidate counts only from its own cell, so
+    buckets shared by several cells need no bookkeeping). Bonds of sphere i: bnbr[bstart[i]:bstart[i + 1]]
+    (partners j > i, bond indices bidx). Writes up to len(out) pairs; returns the number of pairs found (more
+    than len(out): the caller grows `out` and calls again)."""
+    n = x.shape[0]
+    rmax = 0.0
+    for i in range(n):
+        rmax = max(rmax, r[i])
+    S = (2.0 * rmax + skin) * 1.0001
+    cmask, count, entries, cix = hashed_cells(x, S)
     jmask = jkey_tab.shape[0] - 1
     cap = out.shape[0]
     npair = 0
