@@ -78,8 +78,10 @@ if extra:
     subprocess.run([sys.executable, "-m", "pip", "uninstall", "-q", "-y", *extra], check=True)
 EOF
     .venv/bin/python -m pip install -q --no-deps -e .
-    if ! .venv/bin/python -m pip check >&2; then
-      say "$LOCK does not satisfy pyproject.toml: refresh it with ./go lock"
+    local broken
+    if ! broken="$(.venv/bin/python -m pip check 2>&1)"; then
+      echo "$broken" >&2
+      say "the packages of $LOCK do not satisfy pyproject.toml: refresh it with ./go lock"
       exit 1
     fi
     rm -f .venv/.installed-*
