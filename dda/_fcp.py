@@ -8,7 +8,9 @@ cached plane of the pair (or the centroid bisector), and stops when the plane no
 Contact points: the candidates are the vertices of either block inside the overlap slab and the crossings of
 an edge of A with an edge of B seen along n. A point of A's surface (vertex or edge crossing) has the depth
 of B behind it along -n (the line through it is clipped against B); a vertex of B the depth of A beyond it
-along n. The contact point is the middle of that overlap segment. A block resting on a face thus gets the corners
+along n. The contact point is the middle of that overlap segment. Where the other block is thin (its part of
+the line ends before it reaches the point, a corner of it sunk into this block), the point still bears when that
+part lies inside the point's own block: the surfaces overlap along the line by the same depth (``_reaches``). A block resting on a face thus gets the corners
 of the clipped contact polygon (4 for a block on a larger face), an edge on a face its two clipped ends, an
 edge across an edge their crossing, a vertex on a face the vertex.
 
@@ -219,6 +221,23 @@ def clip_line(P, n, fnw, fdw, f0, f1, tol, lat=0.0, sgn=-1.0):
 
 
 @njit(cache=True)
+def _reaches(P, n, fnw, fdw, f0, f1, tol, t, sgn):
+    """True when the block with faces f0..f1, which P lies on, reaches along the line P + s n from P to s = t
+    (sgn = -1: t < 0, the block lies behind P; sgn = +1: t > 0, beyond P).
+
+    A point of one block's surface whose line along n meets the other block only on the far side of the point
+    (the other block is thin there: its part of the line ends before reaching the point) is still a contact
+    when that part lies inside the point's own block: the two surfaces overlap along the line by the same
+    common-plane depth as for a point inside the other block."""
+    lo, hi = clip_line(P, n, fnw, fdw, f0, f1, tol)
+    if lo > hi:
+        return False
+    if sgn < 0.0:
+        return lo <= t + tol
+    return hi >= t - tol
+
+
+@njit(cache=True)
 def _crease_covered(vert, fnw, fdw, p, x0, x1, n, f0, f1, tol, lat, sgn, overlap):
     """True when vertex p of one block, seen along n, lies beyond the edge x0-x1 between the other block's facing
     face and a side face, and is still a contact point (crease rule: it penetrates the facing face and lies
@@ -367,14 +386,18 @@ def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
         if c < na or c >= na + nb:
             # a point of A's surface: its penetration is B's extent behind it along -n
             lo, hi = clip_line(P, n, fnw, fdw, fb0, fb1, tol, lat, -1.0)
-            if hi < -tol or lo > hi:
+            if lo > hi:
                 continue
+            if hi < -tol and not _reaches(P, n, fnw, fdw, fa0, fa1, tol, hi, -1.0):
+                continue  # B's part of the line lies beyond the point and outside A
             depth = min(-lo, sa - sb)  # never deeper than the plane's overlap
             mid = -0.5 * depth
         else:
             # a vertex of B: A's extent beyond it along n
             lo, hi = clip_line(P, n, fnw, fdw, fa0, fa1, tol, lat, 1.0)
-            if lo > tol or lo > hi:
+            if lo > hi:
+                continue
+            if lo > tol and not _reaches(P, n, fnw, fdw, fb0, fb1, tol, lo, 1.0):
                 continue
             depth = min(hi, sa - sb)
             mid = 0.5 * depth
