@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sgim.portable import det3, matmul, norm
+
 
 class PolyhedronError(ValueError):
     """The vertex/face lists do not describe a closed, outward-oriented convex polyhedron."""
@@ -116,12 +118,11 @@ class MassProperties:
     inertia: np.ndarray  # (3,3) second moment tensor of the unit-density body about the centroid
 
 
-# covariance of the reference tetrahedron (0, e1, e2, e3): integral of x x^T over it
-_C_CANON = np.array([[2.0, 1.0, 1.0], [1.0, 2.0, 1.0], [1.0, 1.0, 2.0]]) / 120.0
-
-
 def mass_properties(vertices, faces) -> MassProperties:
-    """Exact volume, centroid and inertia tensor (unit density, about the centroid)."""
+    """Exact volume, centroid and inertia tensor (unit density, about the centroid).
+
+    The covariance of the tetrahedron (0, a, b, c) is det / 120 (a a^T + b b^T + c c^T + s s^T) with
+    s = a + b + c; everything is summed in a fixed order without BLAS (sgim/portable.py)."""
     v = np.asarray(vertices, float)
     ref = v.mean(0)
     vol = 0.0
@@ -130,11 +131,13 @@ def mass_properties(vertices, faces) -> MassProperties:
     for f in faces:
         p0 = v[f[0]] - ref
         for a, b in zip(f[1:-1], f[2:]):
-            A = np.column_stack((p0, v[a] - ref, v[b] - ref))
-            d = np.linalg.det(A)
+            pa = v[a] - ref
+            pb = v[b] - ref
+            d = det3(np.column_stack((p0, pa, pb)))
+            s = p0 + pa + pb
             vol += d / 6.0
-            first += d / 6.0 * A.sum(1) / 4.0
-            cov += d * (A @ _C_CANON @ A.T)
+            first += d / 6.0 * s / 4.0
+            cov += d / 120.0 * (np.outer(p0, p0) + np.outer(pa, pa) + np.outer(pb, pb) + np.outer(s, s))
     if not vol > 0:
         raise PolyhedronError(f"volume {vol:g} is not positive: faces must be counter-clockwise from outside")
     c = first / vol  # centroid relative to ref
@@ -151,12 +154,12 @@ def face_planes(vertices, faces):
     for k, f in enumerate(faces):
         p = v[f]
         n = np.cross(p, np.roll(p, -1, axis=0)).sum(0)
-        ln = np.linalg.norm(n)
+        ln = norm(n)
         if not ln > 0:
             raise PolyhedronError(f"face {k} has zero area")
         n /= ln
         nrm[k] = n
-        off[k] = float(np.mean(p @ n))
+        off[k] = float(np.mean(matmul(p, n)))
     return nrm, off
 
 
@@ -165,7 +168,7 @@ def check_convex(vertices, faces, rel_tol=1e-9):
     v = np.asarray(vertices, float)
     nrm, off = face_planes(v, faces)
     size = float(np.max(np.ptp(v, axis=0))) or 1.0
-    dist = v @ nrm.T - off[None, :]
+    dist = matmul(v, nrm.T) - off[None, :]
     worst = float(dist.max())
     if worst > rel_tol * size:
         k = int(np.argmax(dist.max(0)))

@@ -51,6 +51,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sgim.portable import det3, matmul, norm
+
 from . import _integrate as _it
 from ._broad import LARGE, build_grid, buckets_for, map_cells, n_cells
 from ._fcp import MAXP
@@ -136,7 +138,7 @@ class Simulation:
         self.qs = np.zeros((nb, 6))
         for i in np.nonzero(self.dof12)[0]:
             R = _quat_to_matrix(self.quat[i])
-            self.wb[i] = (R.T @ self.angmom[i]) / A.inertia[i]
+            self.wb[i] = matmul(R.T, self.angmom[i]) / A.inertia[i]
             self.angmom[i] = 0.0
         self.active = np.nonzero(~A.fixed)[0].astype(np.int64)
         self.movable = self.active.copy()
@@ -186,7 +188,7 @@ class Simulation:
         self.qext = np.zeros((0, 6))
         self.energy = np.zeros(6)
         self.stats = np.zeros(12)
-        g0 = float(np.linalg.norm(self.gravity)) or 9.81
+        g0 = norm(self.gravity) or 9.81
         v_s = 1e-4 * math.sqrt(g0 * self.d50) if sleep_velocity is None else float(sleep_velocity)
         a_s = 1e-3 * g0 if sleep_accel is None else float(sleep_accel)
         if sleep and not (v_s > 0 and a_s > 0 and sleep_steps >= 1):
@@ -206,7 +208,7 @@ class Simulation:
         self.E0 = None
         self.fcp_iterations = 0
         # energies below the moving weight over a thousandth of the median block size never count as a blow-up
-        g = float(np.linalg.norm(self.gravity))
+        g = norm(self.gravity)
         self.energy_floor = max(1e-3 * self.d50 * g * float(A.mass[self.active].sum()), 1e-300)
         self.pair_tests = 0
 
@@ -383,8 +385,8 @@ class Simulation:
         A = self.A
         R = self.rotation(i)
         if self.dof12[i]:
-            R = R @ (np.eye(3) + _strain_tensor(self.strain_[i]))
-        return self.pos[i] + A.vloc[A.vert_start[i]:A.vert_start[i + 1]] @ R.T
+            R = matmul(R, np.eye(3) + _strain_tensor(self.strain_[i]))
+        return self.pos[i] + matmul(A.vloc[A.vert_start[i]:A.vert_start[i + 1]], R.T)
 
     def strain(self, i):
         """Body-frame strains (ex, ey, ez, gyz, gzx, gxy) of block i (zero for a rigid block)."""
@@ -403,7 +405,7 @@ class Simulation:
     def volume(self, i):
         """Current volume of block i: V0 det(I + E) for a deformable block."""
         v0 = float(self.A.volume[i])
-        return v0 * float(np.linalg.det(np.eye(3) + _strain_tensor(self.strain_[i]))) if self.dof12[i] else v0
+        return v0 * float(det3(np.eye(3) + _strain_tensor(self.strain_[i]))) if self.dof12[i] else v0
 
     def contacts(self):
         """Current contact points: dict of arrays (a, b, position, normal, normal force, depth, state)."""

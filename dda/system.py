@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sgim.portable import eigh3, matmul, norm
+
 from .polyhedra import PolyhedronError, check_convex, face_planes, half_edges, mass_properties
 
 
@@ -44,7 +46,7 @@ def quat_from_matrix(R):
         s = np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
         q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
     q = np.array(q)
-    return q / np.linalg.norm(q)
+    return q / norm(q)
 
 
 def quat_to_matrix(q):
@@ -118,10 +120,8 @@ class BlockSystem:
             raise ValueError(f"dof must be 6 (rigid) or 12 (deformable) (got {dof!r})")
         if dof == 12 and not (E > 0 and -1.0 < nu < 0.5):
             raise ValueError(f"a deformable block needs E > 0 and -1 < nu < 0.5 (got E = {E!r}, nu = {nu!r})")
-        moments, axes = np.linalg.eigh(mp.inertia)
-        if np.linalg.det(axes) < 0:
-            axes[:, 2] *= -1
-        vloc = (v - mp.centroid) @ axes  # body coordinates along the principal axes
+        moments, axes = eigh3(mp.inertia)  # right-handed, the same bits on every CPU (sgim/portable.py)
+        vloc = matmul(v - mp.centroid, axes)  # body coordinates along the principal axes
         nloc, dloc = face_planes(vloc, faces)
         name = getattr(spec, "name", "") or f"block{len(self._blocks)}"
         mat = material if material is not None else getattr(spec, "material", "rock")
@@ -166,7 +166,7 @@ class BlockSystem:
         x = np.asarray(point, float).reshape(3)
         if not (np.all(np.isfinite(f)) and np.all(np.isfinite(x))):
             raise ValueError("load point and force must be finite")
-        r = quat_to_matrix(b.quat).T @ (x - b.pos)
+        r = matmul(quat_to_matrix(b.quat).T, x - b.pos)
         self._point_loads.append((int(i), r, f))
         self._arrays = None
 
@@ -267,7 +267,7 @@ class SystemArrays:
         for i, b in enumerate(blocks):
             if not b.fixed:
                 R = quat_to_matrix(b.quat)
-                angmom[i] = R @ (b.inertia * (R.T @ b.angular_velocity))
+                angmom[i] = matmul(R, b.inertia * matmul(R.T, b.angular_velocity))
         vel = cat(lambda b: b.velocity, float, (3,))
         for i, b in enumerate(blocks):
             if b.fixed:

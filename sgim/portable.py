@@ -1,0 +1,168 @@
+"""Arithmetic that gives the same bits on every x86-64 CPU.
+
+The project's kernels that decide topology or membership (which side of a plane a sphere centre lies on,
+which features of two blocks touch, which blocks a cut makes) must give the same answer on every machine.
+IEEE-754 makes +, -, *, / and sqrt correctly rounded everywhere, and numba kernels compiled without
+fast-math keep the order of operations as written (no fused multiply-add, no reassociation), so such code
+is bit-reproducible. Three things are not, and are kept out of every value that feeds a decision:
+
+- BLAS and LAPACK (numpy's ``@``, ``np.dot``, ``np.linalg.det`` / ``eigh`` / ``inv``, and
+  ``np.linalg.norm`` of a 1-D array, which calls ``dot``): OpenBLAS picks a kernel per CPU (with or
+  without FMA, other blockings), so the last bits differ between machines;
+- numpy's transcendental functions (``np.sin``, ``np.exp``, ...), which use other SIMD code paths on CPUs
+  with AVX-512;
+- numba kernels compiled with fast-math (``contract`` allows FMA where the CPU has it, ``reassoc`` lets
+  the vectoriser reorder sums by the CPU's vector width).
+
+This module holds the small pieces of linear algebra and trigonometry that the geometry needs, written so
+that only correctly rounded operations (and, for the angles, the C library's ``sin`` / ``cos`` of a reduced
+argument, with exact values at multiples of 45 degrees) decide their results. docs/ARCHITECTURE.md
+("Same answer on every CPU") lists which kernels may use fast-math and why.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def det3(a):
+    """Determinant of a 3 x 3 matrix (cofactor expansion along the first row)."""
+    return (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
+            - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
+            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
+
+
+@njit(cache=True)
+def _rows_times(v, m, out):
+    for i in range(v.shape[0]):
+        for j in range(m.shape[1]):
+            s = 0.0
+            for k in range(v.shape[1]):
+                s += v[i, k] * m[k, j]
+            out[i, j] = s
+    return out
+
+
+def matmul(a, b):
+    """a @ b for 1-D or 2-D float arrays, summed in index order (no BLAS)."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    a2 = np.ascontiguousarray(a.reshape(1, -1) if a.ndim == 1 else a)
+    b2 = np.ascontiguousarray(b.reshape(-1, 1) if b.ndim == 1 else b)
+    if a2.shape[1] != b2.shape[0]:
+        raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not match")
+    out = _rows_times(a2, b2, np.empty((a2.shape[0], b2.shape[1])))
+    if a.ndim == 1 and b.ndim == 1:
+        return float(out[0, 0])
+    if a.ndim == 1:
+        return out[0]
+    if b.ndim == 1:
+        return out[:, 0]
+    return out
+
+
+def norm(x) -> float:
+    """Euclidean length of a vector, summed in index order (np.linalg.norm of a 1-D array calls BLAS dot)."""
+    x = np.asarray(x, float).ravel()
+    s = 0.0
+    for c in x:
+        s += float(c) * float(c)
+    return math.sqrt(s)
+
+
+@njit(cache=True)
+def _jacobi3(s, w, vec):
+    """Eigen-decomposition of a symmetric 3 x 3 matrix by cyclic Jacobi rotations (fixed sweep order)."""
+    a = s.copy()
+    for i in range(3):
+        for j in range(3):
+            vec[i, j] = 1.0 if i == j else 0.0
+    scale = abs(a[0, 0]) + abs(a[1, 1]) + abs(a[2, 2]) + abs(a[0, 1]) + abs(a[0, 2]) + abs(a[1, 2])
+    for _sweep in range(64):
+        off = abs(a[0, 1]) + abs(a[0, 2]) + abs(a[1, 2])
+        if off <= 1e-300 or off <= 1e-18 * scale:
+            break
+        for p in range(2):
+            for q in range(p + 1, 3):
+                apq = a[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+                t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                sn = t * c
+                for k in range(3):  # A <- A J (columns p, q)
+                    akp = a[k, p]
+                    akq = a[k, q]
+                    a[k, p] = c * akp - sn * akq
+                    a[k, q] = sn * akp + c * akq
+                for k in range(3):  # A <- J^T A (rows p, q)
+                    apk = a[p, k]
+                    aqk = a[q, k]
+                    a[p, k] = c * apk - sn * aqk
+                    a[q, k] = sn * apk + c * aqk
+                a[p, q] = 0.0
+                a[q, p] = 0.0
+                for k in range(3):
+                    vkp = vec[k, p]
+                    vkq = vec[k, q]
+                    vec[k, p] = c * vkp - sn * vkq
+                    vec[k, q] = sn * vkp + c * vkq
+    for i in range(3):
+        w[i] = a[i, i]
+
+
+def eigh3(s):
+    """(eigenvalues ascending, unit eigenvectors as columns) of a symmetric 3 x 3 matrix, the same bits on
+    every CPU (np.linalg.eigh calls LAPACK). Each eigenvector's largest component is made positive and the
+    frame right-handed (the last column flipped when needed)."""
+    s = np.ascontiguousarray(s, float).reshape(3, 3)
+    s = 0.5 * (s + s.T)
+    w = np.empty(3)
+    vec = np.empty((3, 3))
+    _jacobi3(s, w, vec)
+    order = sorted(range(3), key=lambda k: (w[k], k))
+    w = w[order]
+    vec = vec[:, order]
+    for k in range(3):
+        big = int(np.argmax(np.abs(vec[:, k])))
+        if vec[big, k] < 0.0:
+            vec[:, k] = -vec[:, k]
+    if det3(vec) < 0.0:
+        vec[:, 2] = -vec[:, 2]
+    return w, vec
+
+
+def sin_cos_deg(angle_deg: float) -> tuple[float, float]:
+    """(sin, cos) of an angle in degrees: exact 0, +-1/2 and +-1 where the true values are, sqrt(1/2) and
+    sqrt(3)/2 correctly rounded at multiples of 45 and 30, and symmetric under the reflections of the circle
+    (sin a = cos(90 - a)), so that planes of round orientation have exactly the normals their symmetry gives
+    them. The reduction to
+    [0, 45] is exact in floating point; only that remainder goes through the C library."""
+    a = math.fmod(float(angle_deg), 360.0)
+    if a < 0.0:
+        a += 360.0
+    q = int(a // 90.0)
+    r = a - 90.0 * q  # exact: both terms are within a factor of two (Sterbenz) or q = 0
+    if q == 4:  # a rounded up to 360
+        q, r = 0, 0.0
+    swap = r > 45.0
+    x = 90.0 - r if swap else r  # in [0, 45], exact (Sterbenz)
+    if x == 0.0:
+        s, c = 0.0, 1.0
+    elif x == 30.0:
+        s, c = 0.5, 0.5 * math.sqrt(3.0)
+    elif x == 45.0:
+        s = c = math.sqrt(0.5)
+    else:
+        s, c = math.sin(math.radians(x)), math.cos(math.radians(x))
+    if swap:
+        s, c = c, s
+    for _ in range(q):  # rotate by 90 degrees: (s, c) -> (c, -s)
+        s, c = c, -s
+    return s + 0.0, c + 0.0  # + 0.0 turns -0.0 into 0.0
