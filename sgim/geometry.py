@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .portable import norm, sin_cos_deg
+
 
 class MeshError(ValueError):
     def __init__(self, message, where="", value=None):
@@ -19,13 +21,22 @@ class MeshError(ValueError):
 
 
 def dip_to_normal(dip_deg, dipdir_deg):
-    d, a = np.radians(dip_deg), np.radians(dipdir_deg)
-    return np.array([np.sin(d) * np.sin(a), np.sin(d) * np.cos(a), np.cos(d)])
+    """Upward unit normal of the plane dip / dip direction (degrees), the same bits on every CPU: round
+    orientations (multiples of 30 and 45 degrees) give the exact components their symmetry gives them
+    (dip 90, dip direction 90 is (1, 0, 0), not (1, 6e-17, 6e-17)), so that a centre lying on a plane through
+    a lattice is decided by the paper's inequality, not by rounding (sgim/portable.py)."""
+    if np.ndim(dip_deg) or np.ndim(dipdir_deg):
+        d, a = np.broadcast_arrays(np.asarray(dip_deg, float), np.asarray(dipdir_deg, float))
+        out = np.array([dip_to_normal(x, y) for x, y in zip(d.ravel(), a.ravel())]).reshape(d.shape + (3,))
+        return np.moveaxis(out, -1, 0)
+    sd, cd = sin_cos_deg(dip_deg)
+    sa, ca = sin_cos_deg(dipdir_deg)
+    return np.array([sd * sa, sd * ca, cd])
 
 
 def normal_to_dip(n):
     """Upward unit normal -> (dip, dip direction) in degrees."""
-    n = np.asarray(n, float) / np.linalg.norm(n)
+    n = np.asarray(n, float) / norm(n)
     if n[2] < 0:
         n = -n
     dip = np.degrees(np.arccos(np.clip(n[2], -1, 1)))

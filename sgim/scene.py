@@ -20,6 +20,7 @@ from .geometry import (
     load_mesh_file,
     triangulate_plan,
 )
+from .portable import norm
 
 
 class SceneError(ValueError):
@@ -107,12 +108,13 @@ class Scene:
     dfn: object = None  # sgim.dfn.DfnSpec when the scene names joint sets or a network file
     cavities: list = field(default_factory=list)  # sgim.cavities.Cavity, from [[cavity]]
     surfaces: list = field(default_factory=list)  # SurfaceDiscontinuity; indices follow every disc
+    limits: dict = field(default_factory=dict)  # [limits]: max_spheres (sgim/limits.py)
 
     @property
     def n_lattice_sites(self) -> int:
-        from .packing import lattice_for
+        from .packing import lattice_counts
 
-        return lattice_for(self).n_sites
+        return lattice_counts(self.packing.kind, self.domain.min, self.domain.max, self.packing.radius)[0]
 
 
 # --------------------------------------------------------------------------
@@ -212,6 +214,20 @@ class _Reader:
 TOP_KEYS = {"name", "description", "domain", "packing", "excavation", "discontinuity", "bonds", "output", "render"}
 TOP_KEYS |= {"dfn", "joint_set"}  # Monte-Carlo fracture network (sgim/dfn.py)
 TOP_KEYS |= {"cavity"}  # inner excavations (sgim/cavities.py)
+TOP_KEYS |= {"limits"}  # resource limits checked before the build (sgim/limits.py)
+LIMIT_KEYS = {"max_spheres"}
+
+
+def read_limits(rd, data, allowed=LIMIT_KEYS):
+    """The [limits] table: each key a positive integer (TOML integer or an integral float such as 1.2e7)."""
+    lt = rd.table(data, "limits", "limits")
+    rd.known(lt, allowed, "limits")
+    out = {}
+    for k, v in lt.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v != int(v) or v < 1:
+            rd.err(f"limits.{k}", v, "must be a positive integer")
+        out[k] = int(v)
+    return out
 
 
 def load_scene(path) -> Scene:
@@ -310,6 +326,7 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
         height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)),
     )
     scene = Scene(path, text, name, domain, packing, excavations, discs, bonds, tuple(formats), render)
+    scene.limits = read_limits(rd, data)
     if "dfn" in data or "joint_set" in data:
         from .dfn import read_dfn
 
@@ -407,7 +424,7 @@ def _read_disc(rd, dt, key, domain, r):
         rd.err(f"{key}.normal", dt["normal"], "give either dip + dip_direction or normal, not both")
     if "normal" in dt:
         n = rd.vector(dt, "normal", f"{key}.normal")
-        length = float(np.linalg.norm(n))
+        length = norm(n)
         if not length > 1e-12 * max(1.0, float(np.abs(n).max())):
             rd.err(f"{key}.normal", n.tolist(), "normal must not be the zero vector")
         normal = n / length
