@@ -45,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sgim.machine import machine_info, machine_line
+
 RADIUS = 0.01
 DENSITY = {"fcc": 0.7405, "random": 0.62}  # solid fraction of sgim's packings (random: measured)
 
@@ -249,6 +251,8 @@ def main(argv=None):
     bad = [p for p in packings if p not in DENSITY]
     if bad:
         ap.error(f"--packing: unknown {', '.join(bad)} (choose from {', '.join(DENSITY)})")
+    machine = machine_info()
+    print(machine_line(machine), flush=True)
     if not {"dda", "dda-central"} <= skip:
         compile_inhouse()
     table = []
@@ -274,7 +278,7 @@ def main(argv=None):
                           "particle_steps_per_cpu_s": crate[name], "cpu_ratio": cratio})
     print(f"load average (1, 5, 15 min) at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     if args.json:
-        args.json.write_text(json.dumps({"rows": table}, indent=2))
+        args.json.write_text(json.dumps({"machine": machine, "rows": table}, indent=2))
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from dda.shapes import box as _box
+from sgim.machine import machine_line
 
 HERE = Path(__file__).resolve().parent
 G = 9.81
@@ -315,7 +316,7 @@ def main(argv=None):
     if bad:
         print(f"unknown part {bad[0]!r}; choose from {', '.join(PARTS)}", file=sys.stderr)
         return 2
-    print(f"# DDA benchmarks ({os.cpu_count()} cores; load average {os.getloadavg()[0]:.2f})")
+    print(f"# DDA benchmarks: {machine_line()}; load average {os.getloadavg()[0]:.2f}")
     for p in parts:
         PARTS[p]()
     return 0

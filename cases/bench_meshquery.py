@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from sgim import shapes
+from sgim.machine import machine_info, machine_line
 from sgim.meshquery import TriMesh
 
 HERE = Path(__file__).parent
@@ -123,6 +124,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--json")
     args = ap.parse_args(argv)
+    machine = machine_info()
+    print(machine_line(machine), flush=True)
     rows = mesh_rows(args.quick)
     print("mesh queries (points/s, medians; VTK on a subset of the same points)")
     print(f"{'mesh':<18s} {'faces':>7s} {'build s':>8s} {'inside':>10s} {'VTK in':>10s} {'agree':>7s} "
@@ -136,7 +139,7 @@ def main(argv=None):
     print(f"{case['scene']}: {case['spheres']} spheres, {case['bonds']} contacts (build without writing files)")
     print("  " + "  ".join(f"{k[:-2]} {v:.2f} s" for k, v in case.items() if k.endswith("_s")))
     if args.json:
-        Path(args.json).write_text(json.dumps({"mesh_queries": rows, "tunnel_jointed": case}, indent=2))
+        Path(args.json).write_text(json.dumps({"machine": machine, "mesh_queries": rows, "tunnel_jointed": case}, indent=2))
 
 
 if __name__ == "__main__":

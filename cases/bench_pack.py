@@ -42,7 +42,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -53,6 +52,8 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+
+from sgim.machine import machine_info, machine_line
 
 REPO = Path(__file__).resolve().parents[1]
 GRADED_PIT = REPO / "cases" / "open_pit_graded.toml"
@@ -314,8 +315,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     from sgim.rpack import RadiusLaw
 
-    results = {"quick": args.quick, "machine": {"cpus": os.cpu_count(), "load_avg_start": os.getloadavg(),
-                                                "python": platform.python_version()}}
+    results = {"quick": args.quick, "machine": {**machine_info(), "load_avg_start": os.getloadavg()}}
+    print(f"# Packing benchmarks: {machine_line(results['machine'])}\n", flush=True)
     work = Path(tempfile.mkdtemp(prefix="bench_pack_"))
     try:
         say("warm-up (numba kernels)")

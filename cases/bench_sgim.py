@@ -52,7 +52,6 @@ import dataclasses
 import json
 import math
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -63,6 +62,8 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+
+from sgim.machine import machine_info, machine_line
 
 REPO = Path(__file__).resolve().parents[1]
 OPEN_PIT = REPO / "cases" / "open_pit.toml"
@@ -850,17 +851,13 @@ def main(argv=None):
     repeats = 1 if args.quick else 3
     work = Path(tempfile.mkdtemp(prefix="bench_sgim_"))
     results = {"quick": args.quick, "git_head": git_head(),
-               "machine": {"cpus": os.cpu_count(), "load_avg_start": os.getloadavg(),
-                           "python": platform.python_version(), "platform": platform.platform()}}
+               "machine": {**machine_info(), "load_avg_start": os.getloadavg()}}
+    print(f"# sgim benchmarks: {machine_line(results['machine'])}\n", flush=True)
     sources0 = sgim_sources()
     try:
         # the in-process parts use the numba cache that the open pit's cold run fills
         cache0 = work / "numba_cache_case0"
         os.environ["NUMBA_CACHE_DIR"] = str(cache0)
-        import numba
-
-        results["machine"]["numba"] = numba.__version__
-        results["machine"]["numpy"] = np.__version__
 
         e2e = bench_end_to_end(work, args.quick, repeats)
         results["end_to_end"] = e2e

@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from cases.bench_dda import _box
+from sgim.machine import machine_line
 
 
 def _scene(k, fixed_cubes=False):
@@ -61,6 +62,7 @@ def main(argv=None):
     ap.add_argument("--sizes", default="2,4,8,16")
     args = ap.parse_args(argv)
     law = ContactLaw(kn=1e7, friction_deg=30.0, damping=0.2)
+    print(machine_line())
     print(f"{'k':>3} {'spheres':>8} {'blocks':>7} {'coupled us':>11} {'spheres us':>11} {'blocks us':>10} "
           f"{'ratio':>6} {'us/body':>8}")
     for k in [int(s) for s in args.sizes.split(",")]:

@@ -29,6 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from sgim.machine import machine_info, machine_line
+
 REPO = Path(__file__).resolve().parent.parent
 SIZE = 100_000
 
@@ -132,9 +134,9 @@ def main(argv=None):
            "case_median_s": case_s[len(case_s) // 2], "case_median_mpi_s": case_n[len(case_n) // 2],
            "busy_mpi": sum(case_n) / (args.ranks * sn["runner_s"]), "serial": s1, "mpi": sn, "efficiency": eff,
            "efficiency_runner": eff_inner, "identical_tables": identical,
-           "overhead": {str(k): v for k, v in over.items()}, "cpus": os.cpu_count()}
-    print(f"study runner benchmark: {args.cases} equal cases (spin, median {res['case_median_s']:.3f} s per case), "
-          f"{os.cpu_count()} CPUs")
+           "overhead": {str(k): v for k, v in over.items()}, "machine": machine_info()}
+    print(machine_line(res["machine"]))
+    print(f"study runner benchmark: {args.cases} equal cases (spin, median {res['case_median_s']:.3f} s per case)")
     print(f"{'run':24s} {'wall s':>8s} {'runner s':>9s} {'load1':>6s}")
     print(f"{'serial':24s} {s1['wall_s']:8.2f} {s1['runner_s']:9.2f} {s1['load1']:6.2f}")
     print(f"{'mpirun -n %d' % args.ranks:24s} {sn['wall_s']:8.2f} {sn['runner_s']:9.2f} {sn['load1']:6.2f}")

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from sgim.cli import CliError, _progress, assembled_folder, run_command  # the same CLI conventions as sgim
+from sgim.machine import machine_info
 
 from .results import ENERGY_COLUMNS
 
@@ -175,6 +176,7 @@ def _run_spheres(scene, out, args, say, t0):
             "dt_critical": sim.dt_crit, "steps": sim.steps, "time": sim.time,
             "wall_s": round(time.perf_counter() - t0, 3),
             "energy_final": dict(zip(ENERGY_COLUMNS, [float(x) for x in e])),
+            "machine": machine_info(),
         }
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
     if status != "ok":
@@ -221,6 +223,7 @@ def cmd_run(args):
             "steps": sim.steps, "time": sim.time, "wall_s": round(time.perf_counter() - t0, 3),
             "energy_final": dict(zip(ENERGY_COLUMNS, [float(x) for x in res.energies[-1]])),
             "contacts_final": int(sim.stats[5]), "points_final": int(sim.stats[6]),
+            "machine": machine_info(),
         }
         _write_outputs(scene, sim, res, tmp, frames, summary, say)
     if status != "ok":

@@ -10,6 +10,7 @@ from . import __version__
 from .cavities import carve
 from .cutting import Discs, SphereGrid, apply_bond_rule, colours, membership, touching_pairs
 from .excavate import FacetSet, kept_sites
+from .machine import machine_info
 from .model import SphereModel
 from .packing import lattice_for
 from .surfdisc import membership_with_surfaces, surface_arrays, surface_geometric_cuts
@@ -115,7 +116,9 @@ def _with_network(scene, discs, tm):
 
 
 def summary(model: SphereModel, timings: dict) -> dict:
-    return {**model.counts(), "meta": model.meta, "timings_s": {k: round(v, 4) for k, v in timings.items()}}
+    """Counts, the model's meta, the stage timings and the machine they were measured on."""
+    return {**model.counts(), "meta": model.meta, "timings_s": {k: round(v, 4) for k, v in timings.items()},
+            "machine": machine_info()}
 
 
 def summary_json(model, timings):
