@@ -97,8 +97,11 @@ def render_meshes(path, blocks=None, spheres=None, width=1600, height=1100, titl
     spheres of their radius, coloured by their `colour` point data where present."""
     import pyvista as pv
 
+    from sgim.render import offscreen_vtk
+
     pv.OFF_SCREEN = True
-    pl = pv.Plotter(off_screen=True, window_size=(int(width), int(height)))
+    with offscreen_vtk():  # no X server tried, no warning on the terminal
+        pl = pv.Plotter(off_screen=True, window_size=(int(width), int(height)))
     pl.set_background("white")
     bounds = []
     if blocks is not None and blocks.n_points:

@@ -1,6 +1,11 @@
 """Off-screen pictures of sphere models in the paper's colours (pyvista / VTK)."""
 from __future__ import annotations
 
+import contextlib
+import functools
+import os
+import sys
+
 import numpy as np
 
 from .model import SphereModel, atomic_path
@@ -12,6 +17,43 @@ COLOURS = np.array([
     [0.10, 0.68, 0.18],  # green
     [0.12, 0.30, 0.92],  # blue
 ])
+
+
+VTK_WINDOW = "VTK_DEFAULT_OPENGL_WINDOW"
+
+
+@functools.lru_cache(maxsize=None)
+def _headless_window_class():
+    """VTK's render window that needs no X server, by the libraries this machine has: EGL (Mesa's software
+    renderer, or a GPU's driver), else OSMesa; None when neither is there."""
+    if not sys.platform.startswith("linux"):
+        return None
+    from ctypes.util import find_library
+
+    for lib, window in (("EGL", "vtkEGLRenderWindow"), ("OSMesa", "vtkOSOpenGLRenderWindow")):
+        if find_library(lib):
+            return window
+    return None
+
+
+@contextlib.contextmanager
+def offscreen_vtk():
+    """Around the making of an off-screen pyvista Plotter: without a display (DISPLAY unset) VTK's default
+    window first tries the X server, fails and writes "bad X server connection" to the terminal before it
+    falls back to EGL; here the window that needs no X server is asked for from the start (VTK reads
+    VTK_DEFAULT_OPENGL_WINDOW whenever it makes a window). A VTK_DEFAULT_OPENGL_WINDOW set by the user, or a
+    display, leaves VTK's choice alone. Yields the window class asked for, or None."""
+    window = None
+    if not os.environ.get(VTK_WINDOW) and not os.environ.get("DISPLAY"):
+        window = _headless_window_class()
+    if window is None:
+        yield None
+        return
+    os.environ[VTK_WINDOW] = window
+    try:
+        yield window
+    finally:
+        os.environ.pop(VTK_WINDOW, None)
 
 
 def visible_spheres(model: SphereModel, hide_intact=False, cut_away=()):
@@ -49,7 +91,8 @@ def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_a
     else:
         solid = idx[(col != 0) | exposed[idx]]
         ghost = idx[:0]
-    pl = pv.Plotter(off_screen=True, window_size=(int(width), int(height)))
+    with offscreen_vtk():
+        pl = pv.Plotter(off_screen=True, window_size=(int(width), int(height)))
     pl.set_background("white")
     lo, hi = model.centers.min(0) if model.n else np.zeros(3), model.centers.max(0) if model.n else np.ones(3)
     span = float(np.max(hi - lo)) or 1.0
@@ -75,8 +118,6 @@ def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_a
     pl.camera.zoom(1.35)
     with atomic_path(path) as tmp:
         pl.screenshot(tmp + ".png")
-        import os
-
         os.replace(tmp + ".png", tmp)
     pl.close()
     return {"drawn": int(len(solid) + len(ghost)), "selected": int(len(idx))}
