@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .process import EngineError
-from .spec import SpecError, SphereRun, from_model, from_scene
+from .spec import SpecError, SphereRun, check_run, check_steps, from_model, from_scene
 
 TARGETS = ("yade", "liggghts", "pfc-text", "vtu")
 RUNNABLE = ("yade", "yade-polyhedra", "liggghts")
@@ -52,8 +52,10 @@ def _toml_kind(path):
     return "sgim"
 
 
-def load_source(source, overrides=None):
-    """(kind, SphereRun or None, SphereModel or None) of `source`; kind: "spheres" or "blocks"."""
+def load_source(source, overrides=None, max_steps=None, limit_steps=True):
+    """(kind, SphereRun or None, SphereModel or None) of `source`; kind: "spheres" or "blocks". With
+    `limit_steps`, a sphere run whose steps pass the step limit (`max_steps`, the --max-steps value, else the
+    scene's; spec.check_steps) is refused."""
     from sgim.model import SphereModel
 
     path = Path(source)
@@ -66,7 +68,8 @@ def load_source(source, overrides=None):
         if kind == "dda-blocks":
             return "blocks", None, None
         if kind == "dda-spheres":
-            run = from_scene(path)
+            run = from_scene(path, max_steps=max_steps, duration=ov.get("duration"), dt=ov.get("dt"),
+                             limit_steps=limit_steps)
             model = _scene_model(path)
         else:
             from sgim.build import build_model
@@ -74,21 +77,19 @@ def load_source(source, overrides=None):
 
             model = build_model(load_scene(path))
             run = from_model(model, source=str(path), **_run_kw(ov))
-    else:
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                is_run = "header" in z.files
-        except (OSError, ValueError) as exc:
-            raise DeckError(f"{path}: cannot read ({str(exc).splitlines()[0]})") from None
-        if is_run:
-            run = SphereRun.load(path)
+    else:  # an npz: a run.npz (it has a JSON header) or a model.npz, validated (sgim.readback.BadFile)
+        from sgim.model import check_model
+        from sgim.readback import read_npz
+
+        arrays = read_npz(path, "a model.npz or run.npz")
+        if "header" in arrays or "bond_i" in arrays:
+            run = SphereRun(**check_run(path, arrays))
         else:
-            try:
-                model = SphereModel.load(path)
-            except (OSError, ValueError, KeyError) as exc:
-                raise DeckError(f"{path}: cannot read the model ({str(exc).splitlines()[0]})") from None
+            model = SphereModel(**check_model(path, arrays, "a model.npz or run.npz"))
             run = from_model(model, source=str(path), **_run_kw(ov))
     _apply_overrides(run, ov, path)
+    if limit_steps and not (path.suffix.lower() == ".toml" and kind == "dda-spheres"):  # from_scene checked it
+        check_steps(run, path, max_steps)
     return "spheres", run, model
 
 
@@ -114,8 +115,12 @@ def _apply_overrides(run, ov, path):
     run.record_every = min(run.record_every, run.duration)
 
 
-def export(source, to, out, variant=None, overrides=None, progress=None):
-    """Write the deck folder `out` for engine/format `to` from `source`; returns its deck.json dict."""
+def export(source, to, out, variant=None, overrides=None, progress=None, max_steps=None):
+    """Write the deck folder `out` for engine/format `to` from `source`; returns its deck.json dict.
+
+    A yade or liggghts deck whose steps (duration / dt) pass the step limit (`max_steps`, the --max-steps
+    value, else the DDA scene's [simulation] max_steps, else 1e8; dda/limits.py) is refused before the folder
+    is made."""
     from sgim.cli import assembled_folder
 
     if to not in TARGETS:
@@ -127,9 +132,19 @@ def export(source, to, out, variant=None, overrides=None, progress=None):
     if out.exists() and not out.is_dir():
         raise DeckError(f"{out}: output exists and is not a folder")
     try:
-        kind, run, model = load_source(source, overrides)
+        kind, run, model = load_source(source, overrides, max_steps=max_steps, limit_steps=to in RUNNABLE)
     except SpecError as exc:
         raise DeckError(str(exc)) from None
+    blocks_scene = None
+    if kind == "blocks" and to == "yade":  # the polyhedra deck's steps, before the folder is made
+        from dda.scene import load_scene
+
+        from .yade_poly import polyhedra_steps
+
+        blocks_scene = load_scene(source)
+        ov = overrides_for_blocks(overrides)
+        ov["dt"], ov["duration"] = polyhedra_steps(blocks_scene, source, ov.get("dt"), ov.get("duration"),
+                                                   max_steps)
     if kind == "blocks" and to != "yade":
         raise DeckError(f"{source}: a block scene (no [spheres]) exports to yade (Polyhedra) only, not {to}")
     if kind == "spheres" and run.n == 0:
@@ -142,7 +157,7 @@ def export(source, to, out, variant=None, overrides=None, progress=None):
             from .yade_poly import write_polyhedra_deck
 
             info["engine"] = "yade-polyhedra"
-            info.update(write_polyhedra_deck(source, tmp, **(overrides_for_blocks(overrides))) or {})
+            info.update(write_polyhedra_deck(source, tmp, **ov, scene=blocks_scene) or {})
         else:
             info.update(name=run.name, n=int(run.n), n_bonds=int(run.n_bonds), n_joints=int(len(run.joint_i)),
                         steps=int(run.steps), dt=float(run.dt), record_steps=int(run.record_steps),
@@ -190,16 +205,52 @@ def write_vtu(run: SphereRun, folder):
 
 
 def read_deck(deck):
+    """deck.json of the deck folder `deck` (a JSON object naming a runnable engine; a liggghts deck's variant, when
+    given, one of its variants). DeckError for a folder without deck.json, BadFile for a broken one."""
+    from sgim.readback import Fields, read_json
+
     deck = Path(deck)
-    try:
-        info = json.loads((deck / "deck.json").read_text())
-    except (OSError, ValueError):
-        raise DeckError(f"{deck}: not a deck folder (no readable deck.json; write one with `adapters export`)") \
-            from None
+    path = deck / "deck.json"
+    if not path.is_file():
+        raise DeckError(f"{deck}: not a deck folder (no deck.json; write one with `adapters export`)")
+    info = read_json(path, "a deck.json")
+    F = Fields(path, info)
     if info.get("engine") not in RUNNABLE:
-        raise DeckError(f"{deck}/deck.json: engine {info.get('engine')!r} is not runnable "
+        raise DeckError(f"{path}: engine {info.get('engine')!r} is not runnable "
                         f"(runnable decks: {', '.join(RUNNABLE)})")
+    if info["engine"] == "liggghts" and info.get("variant") is not None:
+        F.string("variant", choices=VARIANTS["liggghts"])
+    F.strings("approximations", None)
     return info
+
+
+def check_deck(deck, info):
+    """Read back and validate every file of the deck folder `deck` that its engine's runner or script will read
+    (run.npz, yade.json, the LIGGGHTS data header, blocks.npz, poly.json, script files), before the engine is
+    started: a broken file is one BadFile / DeckError line, and nothing is run or written."""
+    deck = Path(deck)
+    engine = info["engine"]
+    need = {"yade": ("run.npz", "script.py", "yade.json"), "liggghts": ("run.npz", "data", "in"),
+            "yade-polyhedra": ("blocks.npz", "poly.json", "script.py")}[engine]
+    for name in need:
+        if not (deck / name).is_file():
+            raise DeckError(f"{deck}: not a complete {engine} deck (missing {name}; write it with `adapters export`)")
+    if engine == "yade-polyhedra":
+        from .yade_poly import check_polyhedra_deck
+
+        check_polyhedra_deck(deck)
+        return
+    run = SphereRun.load(deck / "run.npz")
+    if engine == "yade":
+        from .yade import read_config
+
+        read_config(deck / "yade.json")
+    else:
+        from .liggghts import check_data, deck_variant
+
+        check_data(deck / "data", run, deck_variant(deck))
+    if run.n == 0:
+        raise DeckError(f"{deck / 'run.npz'}: the run has no spheres")
 
 
 def run(deck, out=None, np=1, timeout=None, progress=None):
@@ -210,6 +261,7 @@ def run(deck, out=None, np=1, timeout=None, progress=None):
         raise DeckError(f"--np must be a positive integer (got {np!r})")
     if timeout is not None and not timeout > 0:
         raise DeckError(f"--timeout must be > 0 seconds (got {timeout!r})")
+    check_deck(deck, info)  # every file the run will read, before the engine starts
     out = Path(out) if out is not None else deck / "result"
     engine = info["engine"]
     if engine == "yade":
@@ -221,4 +273,5 @@ def run(deck, out=None, np=1, timeout=None, progress=None):
     return run_deck(deck, out, np=np, timeout=timeout, progress=progress)
 
 
-__all__ = ["export", "run", "load_source", "read_deck", "write_vtu", "DeckError", "EngineError", "TARGETS"]
+__all__ = ["export", "run", "load_source", "read_deck", "check_deck", "write_vtu", "DeckError", "EngineError",
+           "TARGETS"]

@@ -79,9 +79,9 @@ Run by hand (no bond breakage, dumps every record): ``cd DECK && liggghts -in in
 """
 from __future__ import annotations
 
-import json
 import math
 import os
+import re
 import time
 from pathlib import Path
 
@@ -488,17 +488,42 @@ def _delete_commands(types):
 
 
 def deck_variant(folder):
-    """The variant of a deck folder: deck.json's, else the one named in the first line of ``in``."""
+    """The variant of a deck folder: deck.json's, else the one named in the first line of ``in`` (BadFile for a
+    broken deck.json or ``in``, or an unknown variant)."""
+    from sgim.readback import Fields, read_json, read_text
+
     folder = Path(folder)
     if (folder / "deck.json").is_file():
-        v = json.loads((folder / "deck.json").read_text()).get("variant")
+        F = Fields(folder / "deck.json", read_json(folder / "deck.json", "a deck.json"))
+        v = F.string("variant", None) if F.doc.get("variant") is not None else None
         if v:
+            F.string("variant", choices=VARIANTS)
             return v
-    head = (folder / "in").read_text().split("\n", 1)[0]
+    head = read_text(folder / "in", "a LIGGGHTS input").split("\n", 1)[0]
     for v in VARIANTS:
         if f"variant {v}:" in head:
             return v
     return "bonds"
+
+
+def check_data(path, run, variant):
+    """The header of the deck's LIGGGHTS data file agrees with its run.npz: as many atoms as spheres and, for the
+    bonds variant, as many bonds (BadFile otherwise: a data file of another deck, truncated or foreign)."""
+    from sgim.readback import BadFile
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096).decode("utf-8", "replace")
+    except OSError as exc:
+        raise BadFile(path, f"cannot read ({exc.__class__.__name__})") from None
+    if not head.startswith("LIGGGHTS data file"):
+        raise BadFile(path, "not a LIGGGHTS data file written by `adapters export` (no 'LIGGGHTS data file' title)")
+    counts = {m.group(2): int(m.group(1)) for m in re.finditer(r"^\s*(\d+)\s+(atoms|bonds)\s*$", head, re.M)}
+    if counts.get("atoms") != run.n:
+        raise BadFile(path, f"{counts.get('atoms', 'no')} atoms, but run.npz has {run.n} spheres")
+    if variant == "bonds" and counts.get("bonds") != run.n_bonds:
+        raise BadFile(path, f"{counts.get('bonds', 'no')} bonds, but run.npz has {run.n_bonds} bonds")
 
 
 def run_deck(folder, out, np=1, timeout=None, progress=None):
@@ -516,9 +541,12 @@ def _run_deck(folder, out, nprocs, timeout, progress):
     folder, out = Path(folder).resolve(), Path(out).resolve()
     info = {}
     if (folder / "deck.json").is_file():
-        info = json.loads((folder / "deck.json").read_text())
+        from sgim.readback import read_json
+
+        info = read_json(folder / "deck.json", "a deck.json")
     run = SphereRun.load(folder / "run.npz")
     variant = deck_variant(folder)
+    check_data(folder / "data", run, variant)
     out.mkdir(parents=True, exist_ok=True)
     dump = out / ".liggghts_dump.txt"
     log = out / "liggghts.log"

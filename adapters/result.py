@@ -82,16 +82,47 @@ class RunResult:
 
     @classmethod
     def load(cls, folder):
+        """The result in `folder` (result.json + result.npz), validated: result.json a JSON object with the engine,
+        a known status and non-negative counts and times; result.npz with every array of the table above, shapes
+        agreeing with each other and with result.json (n, n_bonds, records, series), record times finite, and
+        positions and velocities finite in a complete result (an incomplete one may hold the NaN of a blow-up).
+        Raises sgim.readback.BadFile naming the file and the first defect."""
+        from sgim.readback import Arrays, Fields, read_json, read_npz
+
         folder = Path(folder)
-        head = json.loads((folder / "result.json").read_text())
-        with np.load(folder / "result.npz", allow_pickle=False) as z:
-            arr = {k: z[k] for k in z.files}
-        series = {k[len("series_"):]: v for k, v in arr.items() if k.startswith("series_")}
-        pos = arr["pos"] if arr["pos"].size else None
-        return cls(engine=head["engine"], x0=arr["x0"], final_pos=arr["final_pos"], final_vel=arr["final_vel"],
-                   bond_intact=arr["bond_intact"], time=arr["time"], pos=pos, series=series, status=head["status"],
-                   message=head.get("message", ""), steps=head.get("steps", 0), dt=head.get("dt", 0.0),
-                   wall_s=head.get("wall_s", 0.0), extra=head.get("extra", {}))
+        jpath, npath = folder / "result.json", folder / "result.npz"
+        F = Fields(jpath, read_json(jpath, "a result.json"))
+        head = {"engine": F.string("engine"), "status": F.string("status", choices=(COMPLETE, INCOMPLETE)),
+                "message": F.string("message", ""), "steps": F.number("steps", 0, integer=True, nonneg=True),
+                "dt": F.number("dt", 0.0, nonneg=True), "wall_s": F.number("wall_s", 0.0, nonneg=True),
+                "extra": F.obj("extra", {})}
+        A = Arrays(npath, read_npz(npath, "a result.npz"), "a result.npz")
+        A.missing(("time", "pos", "x0", "final_pos", "final_vel", "bond_intact"))
+        done = head["status"] == COMPLETE
+        x0 = A.real("x0", (None, 3), finite=done)
+        n = len(x0)
+        t = A.real("time", (None,))
+        r = len(t)
+        pos = A.real("pos", None, finite=False)
+        if pos.ndim != 3 or pos.shape[1:] != (n, 3) or pos.shape[0] not in (0, r):
+            A.fail(f"pos: shape {tuple(pos.shape)}, expected ({r}, {n}, 3) or (0, {n}, 3) (records x spheres of x0)")
+        series = {}
+        for k in A.arrays:
+            if k.startswith("series_"):
+                series[k[len("series_"):]] = A.real(k, (r,), finite=False, per="one per record of time",
+                                                    dtype=A.arrays[k].dtype)
+        one = "one per sphere of x0"
+        res = cls(engine=head["engine"], x0=x0, final_pos=A.real("final_pos", (n, 3), finite=done, per=one),
+                  final_vel=A.real("final_vel", (n, 3), finite=done, per=one),
+                  bond_intact=A.boolean("bond_intact", (None,)), time=t, pos=pos if pos.size else None,
+                  series=series, status=head["status"], message=head["message"], steps=head["steps"], dt=head["dt"],
+                  wall_s=head["wall_s"], extra=head["extra"])
+        for key, have in (("n", n), ("n_bonds", len(res.bond_intact)), ("records", r)):
+            if key in F.doc and F.number(key, integer=True, nonneg=True) != have:
+                F.fail(key, F.doc[key], f"does not match {npath.name}, which holds {have}")
+        if "series" in F.doc and sorted(F.strings("series")) != sorted(series):
+            F.fail("series", F.doc["series"], f"does not match {npath.name}, which holds {sorted(series)}")
+        return res
 
 
 __all__ = ["RunResult", "COMPLETE", "INCOMPLETE"]

@@ -124,10 +124,11 @@ class SphereRun:
 
     @classmethod
     def load(cls, path):
-        with np.load(path, allow_pickle=False) as z:
-            kw = {k: z[k] for k in ARRAYS if k in z.files or k not in OPTIONAL_ARRAYS}
-            kw.update(json.loads(str(z["header"])))
-        return cls(**kw)
+        """The run in the npz `path` (a deck's run.npz), validated (:func:`check_run`): a file that is not a
+        usable run raises sgim.readback.BadFile (a CliError: ``FILE: what is wrong``)."""
+        from sgim.readback import read_npz
+
+        return cls(**check_run(path, read_npz(path, "a run.npz")))
 
     def in_house(self):
         """(SphereSet, SphereSimulation) of the in-house engine for this run (dda.spheres)."""
@@ -138,6 +139,69 @@ class SphereRun:
         law = ContactLaw(kn=self.kn, ks=self.ks, friction_deg=self.friction_deg, damping=self.damping)
         sim = SphereSimulation(ss, law, gravity=self.gravity, dt=self.dt, local_damping=self.local_damping)
         return ss, sim
+
+
+HEADER = ("name", "density", "kn", "ks", "friction_deg", "damping", "joint_friction_deg", "smooth_joints", "dt",
+          "duration", "record_every", "local_damping", "source", "extra")
+
+
+def check_run(path, arrays):
+    """The SphereRun keywords of the arrays `arrays` read from the run.npz `path`: the JSON header holds the
+    scalars (positive density, stiffness and times, angles 0..90 degrees, ...), every array is present (the loads
+    may be absent) with its dtype kind and shape, lengths agree (n spheres, m bonds, k joint pairs, c cut pairs),
+    centres / radii / stiffnesses / normals / loads are finite, radii > 0, strengths >= 0 (inf: unbreakable), colour
+    codes 0..3, every sphere index in range and no sphere both fixed and prescribed. Raises
+    sgim.readback.BadFile naming the file and the first defect."""
+    from sgim.readback import Arrays, Fields, parse_json
+
+    A = Arrays(path, arrays, "a run.npz")
+    A.missing(["header", *(k for k in ARRAYS if k not in OPTIONAL_ARRAYS)])
+    F = Fields(path, parse_json(path, A.text("header"), where="header"), where="header.")
+    F.only(HEADER)
+    kw = {"name": F.string("name"), "density": F.number("density", positive=True),
+          "kn": F.number("kn", positive=True), "ks": F.number("ks", nonneg=True),
+          "friction_deg": F.number("friction_deg", lo=0, hi=90), "damping": F.number("damping", nonneg=True),
+          "joint_friction_deg": F.number("joint_friction_deg", lo=0, hi=90),
+          "smooth_joints": F.boolean("smooth_joints"), "dt": F.number("dt", positive=True),
+          "duration": F.number("duration", positive=True), "record_every": F.number("record_every", positive=True),
+          "local_damping": F.number("local_damping", lo=0, hi=1), "source": F.string("source", ""),
+          "extra": F.obj("extra", {})}
+    c = kw["centers"] = A.real("centers", (None, 3))
+    n = len(c)
+    sph, one = f"the run has {n} spheres", "one per sphere of centers"
+    kw["radii"] = A.real("radii", (n,), positive=True, per=one)
+    kw["colour"] = A.integer("colour", (n,), lo=0, hi=4, why="colour codes 0 intact, 1 red, 2 green, 3 blue",
+                             per=one, dtype=np.int8)
+    kw["fixed"] = A.boolean("fixed", (n,), per=one)
+    for a, b, what in (("bond_i", "bond_j", "bond"), ("joint_i", "joint_j", "joint pair"),
+                       ("cut_i", "cut_j", "cut pair")):
+        i = kw[a] = A.integer(a, (None,), lo=0, hi=n, why=sph)
+        j = kw[b] = A.integer(b, (len(i),), lo=0, hi=n, why=sph, per=f"one per {what} of {a}")
+        same = i == j
+        if same.any():
+            k = int(np.argmax(same))
+            A.fail(f"{a}[{k}] = {b}[{k}] = {int(i[k])}: a {what} of a sphere with itself")
+    m, per = len(kw["bond_i"]), "one per bond of bond_i"
+    kw["bond_len0"] = A.real("bond_len0", (m,), nonneg=True, per=per)
+    kw["bond_kn"] = A.real("bond_kn", (m,), nonneg=True, per=per)
+    kw["bond_ks"] = A.real("bond_ks", (m,), nonneg=True, per=per)
+    kw["bond_ft"] = A.real("bond_ft", (m,), nonneg=True, allow_inf=True, per=per)
+    kw["bond_fs"] = A.real("bond_fs", (m,), nonneg=True, allow_inf=True, per=per)
+    k, per = len(kw["joint_i"]), "one per joint pair of joint_i"
+    kw["joint_disc"] = A.integer("joint_disc", (k,), lo=0, per=per, dtype=np.int32)
+    kw["joint_normal"] = A.real("joint_normal", (k, 3), per=per)
+    kw["gravity"] = A.real("gravity", (3,))
+    if A.has("force"):
+        kw["force"] = A.real("force", (n, 3), per=one)
+    if A.has("velocity"):
+        kw["velocity"] = A.real("velocity", (n, 3), per=one)
+    if A.has("prescribed"):
+        p = kw["prescribed"] = A.boolean("prescribed", (n,), per=one)
+        both = p & kw["fixed"]
+        if both.any():
+            A.fail(f"prescribed[{int(np.argmax(both))}] = fixed[{int(np.argmax(both))}] = True: a sphere cannot be "
+                   "both fixed and prescribed")
+    return kw
 
 
 def _sphere_set(run: SphereRun):
@@ -230,9 +294,13 @@ def _set_loads(run, force, prescribed, velocity):
     run.force, run.prescribed, run.velocity = f, p, np.where(p[:, None], v, 0.0)
 
 
-def from_scene(path):
+def from_scene(path, max_steps=None, duration=None, dt=None, limit_steps=True):
     """SphereRun of a DDA scene file with [spheres] (its [simulation], [contact] and [spheres] keys; a scene
-    with blocks is refused: decks carry spheres only, fixed regions stand in for walls)."""
+    with blocks is refused: decks carry spheres only, fixed regions stand in for walls).
+
+    The run's steps at `duration` and `dt` (the --duration and --dt overrides; default the scene's) are checked
+    against the step limit (`max_steps`, the --max-steps value, else the scene's; :func:`check_steps`) unless
+    `limit_steps` is false (exports that run nothing: pfc-text, vtu)."""
     from dda.scene import load_scene
     from sgim.scene import SceneError
 
@@ -248,14 +316,40 @@ def from_scene(path):
     force, prescribed, velocity = scene.sphere_loads(model.centers)
     law = scene.law
     try:
-        return from_model(model, density=sp["density"], fixed=fixed, bonds=sp["bonds"], kn=law.kn, ks=law.ks,
-                          friction_deg=law.friction_deg, damping=law.damping,
-                          joint_friction_deg=sp.get("joint_friction"), smooth_joints=sp.get("smooth_joints", True),
-                          gravity=scene.gravity, dt=scene.dt, safety=scene.safety, duration=scene.duration,
-                          record_every=scene.record_every, local_damping=scene.local_damping, name=scene.name,
-                          source=str(path), force=force, prescribed=prescribed, velocity=velocity)
+        run = from_model(model, density=sp["density"], fixed=fixed, bonds=sp["bonds"], kn=law.kn, ks=law.ks,
+                         friction_deg=law.friction_deg, damping=law.damping,
+                         joint_friction_deg=sp.get("joint_friction"), smooth_joints=sp.get("smooth_joints", True),
+                         gravity=scene.gravity, dt=dt or scene.dt, safety=scene.safety, duration=scene.duration,
+                         record_every=scene.record_every, local_damping=scene.local_damping, name=scene.name,
+                         source=str(path), force=force, prescribed=prescribed, velocity=velocity)
     except SpecError as exc:
         raise SceneError(Path(path), "spheres.model", sp.get("path"), str(exc).split(": ", 1)[-1]) from None
+    if limit_steps and all(v is None or v > 0 for v in (duration, dt)):  # bad overrides: _apply_overrides
+        check_steps(run, path, max_steps, scene=scene, duration=duration, dt=dt)
+    return run
 
 
-__all__ = ["SphereRun", "SpecError", "from_model", "from_scene", "joint_pairs"]
+def check_steps(run, path, max_steps=None, scene=None, duration=None, dt=None):
+    """SceneError (one line, dda/limits.py) when the deck's steps, `duration` / `dt` (the --duration / --dt
+    overrides, default the run's), pass the step limit: `max_steps` (--max-steps), else the DDA scene's
+    [simulation] max_steps, else dda.limits.DEFAULT_MAX_STEPS. With the DDA `scene` the message names its keys
+    (simulation.duration, simulation.dt or the stiffness that sets the critical step); otherwise --duration and
+    --dt (a model or run.npz has no scene keys). Returns the steps."""
+    from dda.limits import check, sphere_bond_key, sphere_dt_source
+
+    dur = float(run.duration if duration is None else duration)
+    step = float(run.dt if dt is None else dt)
+    dkey = "--duration" if duration is not None or scene is None else "simulation.duration"
+    kw = dict(max_steps=max_steps, scene=scene, duration_key=dkey, raise_limit=None if scene is not None
+              else "raise --max-steps")
+    if dt is not None or scene is None:
+        return check(path, dur, step, dt_key="--dt", dt_value=step, auto_dt=False, **kw)
+    if scene.dt is not None:
+        return check(path, dur, step, dt_key="simulation.dt", dt_value=scene.dt, auto_dt=False, **kw)
+    bkey, bval = sphere_bond_key(scene)
+    key, value = sphere_dt_source(run.kn, run.ks, run.n, run.bond_i, run.bond_j, run.bond_kn, run.bond_ks, bkey, bval)
+    return check(path, dur, step, dt_key=key, dt_value=value, auto_dt=True, dt_crit=step / scene.safety,
+                 safety=scene.safety, **kw)
+
+
+__all__ = ["SphereRun", "SpecError", "check_run", "check_steps", "from_model", "from_scene", "joint_pairs"]

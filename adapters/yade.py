@@ -102,9 +102,32 @@ def write_deck(run: SphereRun, folder, *, dump_bonds=False, detection_factor=1.0
     return {"files": ["run.npz", "script.py", "yade.json"], "yade": cfg, "approximations": approximations(run)}
 
 
-def _load(path):
-    with np.load(path, allow_pickle=False) as z:
-        return {k: z[k] for k in z.files}
+def read_config(path):
+    """yade.json of a YADE sphere deck (the keys yade_script.py reads), validated: BadFile for a broken file."""
+    from sgim.readback import Fields, read_json
+
+    F = Fields(path, read_json(path, "a yade.json"))
+    if "detection_factor" in F.doc:
+        F.number("detection_factor", lo=1.0, hi=1.2)
+    if "max_detection_factor" in F.doc:
+        F.number("max_detection_factor", lo=1.0, hi=1.2)
+    F.boolean("record_positions", True)
+    F.boolean("dump_bonds", False)
+    return F.doc
+
+
+def _load(path, keys=(), engine="yade"):
+    """The arrays of an npz the YADE script wrote; a broken one (or one without `keys`) is an EngineError."""
+    from sgim.readback import BadFile, read_npz
+
+    try:
+        arrays = read_npz(path, "an npz written by the YADE script")
+    except BadFile as exc:
+        raise EngineError(f"{engine}: {exc}") from None
+    gone = [k for k in keys if k not in arrays]
+    if gone:
+        raise EngineError(f"{engine}: {path}: missing array(s) {', '.join(gone)} (not written by the YADE script)")
+    return arrays
 
 
 def _result(folder, out, outcome, np_):
@@ -113,7 +136,8 @@ def _result(folder, out, outcome, np_):
     run = SphereRun.load(folder / "run.npz")
     n, m = run.n, run.n_bonds
     x0 = np.asarray(run.centers, float)
-    series = _load(out / "yade_series.npz") if (out / "yade_series.npz").exists() else None
+    series = _load(out / "yade_series.npz", ("time", "kinetic", "bonds_intact")) \
+        if (out / "yade_series.npz").exists() else None
     t = np.asarray(series["time"], float) if series else np.zeros(0)
     ser = {"kinetic": np.asarray(series["kinetic"], float),
            "bonds_intact": np.asarray(series["bonds_intact"], np.int64)} if series else {}
@@ -125,12 +149,19 @@ def _result(folder, out, outcome, np_):
         pos = raw[:r * 3 * n].reshape(r, n, 3)
         t = t[:r] if pos is not None and len(t) > r else t
         ser = {k: v[:len(t)] for k, v in ser.items()}
-    setup = json.loads((out / "yade_setup.json").read_text()) if (out / "yade_setup.json").exists() else {}
+    setup = {}
+    if (out / "yade_setup.json").exists():
+        from sgim.readback import BadFile, read_json
+
+        try:
+            setup = read_json(out / "yade_setup.json", "a yade_setup.json")
+        except BadFile as exc:
+            raise EngineError(f"yade: {exc}") from None
     extra = {"approximations": approximations(run), "setup": setup, "threads": int(np_),
              "log": str(out / "yade.log")}
     final = out / "yade_final.npz"
     if outcome.ok and final.exists():
-        f = _load(final)
+        f = _load(final, ("wall_run", "tens_cracks", "shear_cracks", "final_pos", "final_vel", "bond_intact", "steps"))
         extra["wall_run_s"] = float(f["wall_run"])
         extra["cracks"] = {"tension": int(f["tens_cracks"]), "shear": int(f["shear_cracks"])}
         return RunResult(engine="yade", x0=x0, final_pos=f["final_pos"], final_vel=f["final_vel"],
@@ -140,7 +171,7 @@ def _result(folder, out, outcome, np_):
     fp, fv, bi, steps = x0.copy(), np.zeros_like(x0), np.ones(m, bool), 0
     snap = out / "yade_snapshot.npz"
     if snap.exists():
-        s = _load(snap)
+        s = _load(snap, ("pos", "vel", "bond_intact", "steps"))
         fp, fv, bi, steps = s["pos"], s["vel"], s["bond_intact"].astype(bool), int(s["steps"])
         extra["final_from"] = f"snapshot at step {steps}"
     if pos is not None and len(pos) and len(t) and t[-1] > steps * run.dt:

@@ -61,16 +61,41 @@ APPROXIMATIONS = [
 ]
 
 
-def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_every=None, young=None):
+def polyhedra_steps(scene, scene_path, dt=None, duration=None, max_steps=None):
+    """(dt, duration) of the polyhedra deck of the DDA block scene `scene`: dt given (--dt), the scene's
+    [simulation] dt, or the in-house critical step; SceneError when duration / dt passes the step limit
+    (`max_steps`, the --max-steps value, else the scene's; dda/limits.py)."""
+    from dda.limits import block_dt_source, check
+
+    duration = float(duration if duration is not None else scene.duration)
+    kw = dict(max_steps=max_steps, scene=scene,
+              duration_key="--duration" if duration != scene.duration else "simulation.duration")
+    if dt is not None or scene.dt is not None:
+        key = "--dt" if dt is not None else "simulation.dt"
+        dt = float(dt if dt is not None else scene.dt)
+        if dt > 0 and duration > 0:
+            check(scene_path, duration, dt, dt_key=key, dt_value=dt, auto_dt=False, **kw)
+        return dt, duration
+    _, sim = scene.build(check=False)
+    if duration > 0:
+        key, value = block_dt_source(scene)
+        check(scene_path, duration, sim.dt, dt_key=key, dt_value=value, auto_dt=True, dt_crit=sim.dt_crit,
+              safety=scene.safety, **kw)
+    return sim.dt, duration
+
+
+def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_every=None, young=None, scene=None,
+                         max_steps=None):
     """Write the polyhedra deck of a DDA block scene into `folder`; returns the extra deck.json keys.
     `dt`, `duration`, `record_every`, `young` override the scene's values (young: the YADE PolyhedraMat
-    modulus, default from [contact] kn as in the module docstring)."""
+    modulus, default from [contact] kn as in the module docstring). `scene`: the DDAScene of `scene_path` when
+    already loaded; `max_steps`: the step limit (polyhedra_steps)."""
     from dda.polyhedra import mass_properties
     from dda.scene import load_scene
     from sgim.scene import SceneError
 
     scene_path = Path(scene_path)
-    scene = load_scene(scene_path)
+    scene = scene if scene is not None else load_scene(scene_path)
     if scene.spheres:
         raise SceneError(scene_path, "spheres", scene.spheres.get("path"),
                          "a polyhedra deck takes blocks only (use the sphere deck for [spheres])")
@@ -87,7 +112,6 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
         raise SceneError(scene_path, "load", len(scene.loads), "point loads are not supported by the YADE "
                                                                 "polyhedra deck")
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     law = scene.law
     ks = law.kn / 2 if law.ks is None else law.ks
     free = [b for b in scene.blocks if not b.fixed]
@@ -95,17 +119,13 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
     L = float(np.mean(vols)) ** (1.0 / 3.0)
     E = float(young) if young is not None else 2.0 * law.kn / L ** 2
     nu = ks * L ** 2 / law.kn if young is None else ks / law.kn
-    if dt is None:
-        dt = scene.dt
-    if dt is None:
-        _, sim = scene.build()
-        dt = sim.dt
+    dt, duration = polyhedra_steps(scene, scene_path, dt, duration, max_steps)
     dt = float(dt)
-    duration = float(duration if duration is not None else scene.duration)
     record_every = float(record_every if record_every is not None else scene.record_every)
     if not (dt > 0 and math.isfinite(dt) and duration > 0 and record_every > 0):
         raise SceneError(scene_path, "simulation", {"dt": dt, "duration": duration}, "dt, duration and "
                                                                                      "record_every must be > 0")
+    folder.mkdir(parents=True, exist_ok=True)  # after the checks: a refused deck leaves no folder
     steps = max(1, int(round(duration / dt)))
     rec = max(1, int(round(record_every / dt)))
     verts = [np.asarray(b.vertices, float) for b in scene.blocks]
@@ -135,26 +155,61 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
             "approximations": approx}
 
 
-def _load(path):
-    with np.load(path, allow_pickle=False) as z:
-        return {k: z[k] for k in z.files}
+def check_polyhedra_deck(folder):
+    """(poly.json dict, blocks.npz arrays) of a polyhedra deck, validated before YADE starts (the keys and arrays
+    yade_poly_script.py reads): BadFile naming the file and the first defect."""
+    from sgim.readback import Arrays, Fields, read_json, read_npz
+
+    folder = Path(folder)
+    path = folder / "poly.json"
+    F = Fields(path, read_json(path, "a poly.json"))
+    cfg = {"young": F.number("young", positive=True), "poisson": F.number("poisson", nonneg=True),
+           "friction_deg": F.number("friction_deg", lo=0, hi=90), "gravity": F.vector("gravity", 3),
+           "local_damping": F.number("local_damping", lo=0, hi=1), "dt": F.number("dt", positive=True),
+           "steps": F.number("steps", integer=True, lo=1), "record_steps": F.number("record_steps", integer=True, lo=1),
+           "approximations": F.strings("approximations", [])}
+    cfg = {**F.doc, **cfg}
+    path = folder / "blocks.npz"
+    A = Arrays(path, read_npz(path, "a blocks.npz"), "a blocks.npz")
+    A.missing(("vertices", "vert_start", "fixed", "density", "velocity", "angular_velocity", "names"))
+    fixed = A.boolean("fixed", (None,))
+    nb = len(fixed)
+    if nb == 0:
+        A.fail("fixed: the deck has no blocks")
+    one = "one per block of fixed"
+    verts = A.real("vertices", (None, 3))
+    start = A.integer("vert_start", (nb + 1,), lo=0, hi=len(verts) + 1, per="one more than the blocks")
+    few = np.diff(start) < 4
+    if start[0] != 0 or start[-1] != len(verts) or few.any():
+        A.fail(f"vert_start = {start.tolist()[:8]}: must rise from 0 to {len(verts)} by at least 4 vertices a block")
+    b = {"vertices": verts, "vert_start": start, "fixed": fixed,
+         "density": A.real("density", (nb,), positive=True, per=one),
+         "velocity": A.real("velocity", (nb, 3), per=one),
+         "angular_velocity": A.real("angular_velocity", (nb, 3), per=one),
+         "names": np.asarray(A.strings("names", (nb,), per=one))}
+    return cfg, b
+
+
+def _load(path, keys=()):
+    from .yade import _load as load
+
+    return load(path, keys, engine="yade-polyhedra")
 
 
 def _result(folder, out, outcome, np_):
-    cfg = json.loads((folder / "poly.json").read_text())
-    b = _load(folder / "blocks.npz")
+    cfg, b = check_polyhedra_deck(folder)
     nb = len(b["fixed"])
     extra = {"approximations": cfg["approximations"], "names": b["names"].tolist(),
              "fixed": b["fixed"].tolist(), "young": cfg["young"], "poisson": cfg["poisson"],
              "threads": int(np_), "log": str(out / "yade-polyhedra.log")}
-    s = _load(out / "yade_series.npz") if (out / "yade_series.npz").exists() else None
+    s = _load(out / "yade_series.npz", ("time", "pos", "kinetic")) if (out / "yade_series.npz").exists() else None
     t = np.asarray(s["time"], float) if s else np.zeros(0)
     pos = np.asarray(s["pos"], float).reshape(-1, nb, 3) if s else None
     ser = {"kinetic": np.asarray(s["kinetic"], float)} if s else {}
     x0 = pos[0].copy() if pos is not None and len(pos) else np.full((nb, 3), np.nan)
     final = out / "yade_final.npz"
     if outcome.ok and final.exists():
-        f = _load(final)
+        f = _load(final, ("wall_run", "final_pos", "final_vel", "steps"))
         extra["wall_run_s"] = float(f["wall_run"])
         return RunResult(engine="yade-polyhedra", x0=x0, final_pos=f["final_pos"], final_vel=f["final_vel"],
                          bond_intact=np.zeros(0, bool), time=t, pos=pos, series=ser, status=COMPLETE,
@@ -214,7 +269,7 @@ def main(argv=None):
     return 0
 
 
-__all__ = ["write_polyhedra_deck", "run_polyhedra_deck"]
+__all__ = ["write_polyhedra_deck", "run_polyhedra_deck", "check_polyhedra_deck"]
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -21,7 +21,9 @@ Faults:
 
 The table (rank 0 only): OUTDIR/results.jsonl then OUTDIR/results.csv get each row as one write, flushed and
 fsynced. results.csv is the record: on a restart a torn last line (a crash inside a write) is dropped, and
-JSON lines whose case is not in results.csv are dropped. When every case is in, both files are rewritten in
+JSON lines whose case is not in results.csv are dropped; any other line that is not a row of the study's table
+(not UTF-8 or CSV or JSON, the wrong number of cells, an unknown status or case, a case twice) stops the run with
+one line naming the file and the line (:func:`check_table`), before any case runs. When every case is in, both files are rewritten in
 case order (temporary file, fsync, atomic rename), so serial and MPI runs give the same files (apart from the
 wall_s and rank columns).
 A lock (flock on OUTDIR/.lock) stops two runs writing one folder. OUTDIR/runs.jsonl gets one line per
@@ -48,6 +50,7 @@ from collections import deque
 from pathlib import Path
 
 from sgim.cli import CliError
+from sgim.readback import BadFile
 
 FIXED_COLUMNS = ("case_id", "status", "error", "wall_s", "rank")
 POLL_S = 0.002
@@ -345,6 +348,68 @@ def _fsync_dir(path):
         os.close(fd)
 
 
+STATUSES = ("ok", "failed", "timeout")
+
+
+def _text(path, data):
+    """`data` (bytes of `path`) as UTF-8 text; BadFile naming the line of an undecodable byte."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise BadFile(path, f"line {line}: not UTF-8 text") from None
+
+
+def csv_records(path, data):
+    """[(line number, cells)] of the CSV text `data` (bytes read from `path`): a record whose quoted cell holds a
+    line break counts from its first line. BadFile naming the line of text that is not UTF-8 or not CSV."""
+    text = _text(path, data)
+    reader = csv.reader(io.StringIO(text, newline=""))
+    out, start = [], 1
+    try:
+        for cells in reader:
+            out.append((start, cells))
+            start = reader.line_num + 1
+    except csv.Error as exc:
+        raise BadFile(path, f"line {reader.line_num}: not a CSV line ({exc})") from None
+    return out
+
+
+def check_table(path, records, columns=None):
+    """The records of a results table (results.csv), checked: a header starting with the fixed columns (equal to
+    `columns` when given), every row with one cell per column, a case id, a status of ok / failed / timeout,
+    wall_s a number or empty, rank an integer or empty, no case twice. BadFile naming the file and line."""
+    if not records:
+        return records
+    no, header = records[0]
+    if columns is not None and header != list(columns):
+        raise CliError(f"{path}: the table's columns differ from this study's "
+                       f"({', '.join(header[:8])}...): write to a new output folder")
+    if tuple(header[:len(FIXED_COLUMNS)]) != FIXED_COLUMNS:
+        raise BadFile(path, f"line {no}: not a results table (its columns start {', '.join(header[:5])!r}, "
+                            f"expected {', '.join(FIXED_COLUMNS)})")
+    seen = {}
+    for no, cells in records[1:]:
+        if len(cells) != len(header):
+            raise BadFile(path, f"line {no}: {len(cells)} cells, expected {len(header)} (one per column)")
+        cid, status, _, wall, rank = cells[:5]
+        if not cid:
+            raise BadFile(path, f"line {no}: case_id is empty")
+        if cid in seen:
+            raise BadFile(path, f"line {no}: case {cid} repeats line {seen[cid]}")
+        seen[cid] = no
+        if status not in STATUSES:
+            raise BadFile(path, f"line {no}: status = {status!r}: must be one of {', '.join(STATUSES)}")
+        try:
+            if wall:
+                float(wall)
+            if rank:
+                int(rank)
+        except ValueError:
+            raise BadFile(path, f"line {no}: wall_s = {wall!r}, rank = {rank!r}: must be numbers") from None
+    return records
+
+
 class Table:
     """results.csv + results.jsonl, append-only, one fsynced write per row (see the module doc)."""
 
@@ -375,10 +440,11 @@ class Table:
         os.fdatasync(fh.fileno())
 
     @staticmethod
-    def _complete_lines(path):
-        """The file's complete lines (a torn last line is cut off the file)."""
+    def _complete_bytes(path):
+        """The file's complete lines as bytes (a torn last line, the trace of a crash inside a write, is cut off
+        the file)."""
         if not path.exists():
-            return []
+            return b""
         data = path.read_bytes()
         cut = data.rfind(b"\n") + 1
         if cut != len(data):
@@ -386,33 +452,44 @@ class Table:
                 fh.truncate(cut)
                 fh.flush()
                 os.fsync(fh.fileno())
-        return data[:cut].decode("utf-8", "replace").splitlines(keepends=True)
+        return data[:cut]
+
+    def _records(self):
+        """[(line number, cells)] of results.csv, checked (:func:`check_table`)."""
+        return check_table(self.csv_path, csv_records(self.csv_path, self._complete_bytes(self.csv_path)),
+                           self.columns)
+
+    def _json_lines(self):
+        """[(line number, case id, line)] of results.jsonl (every complete line a JSON object with a case_id)."""
+        path = self.jsonl_path
+        out = []
+        for no, line in enumerate(_text(path, self._complete_bytes(path)).splitlines(keepends=True), 1):
+            try:
+                rec = json.loads(line)
+            except ValueError:
+                raise BadFile(path, f"line {no}: not a JSON line of the results table") from None
+            cid = rec.get("case_id") if isinstance(rec, dict) else None
+            if not isinstance(cid, str) or not cid:
+                raise BadFile(path, f"line {no}: not a row of the results table (no case_id)")
+            out.append((no, cid, line))
+        return out
 
     def _recover(self):
-        lines = self._complete_lines(self.csv_path)
-        if lines:
-            header = next(csv.reader([lines[0]]))
-            if header != self.columns:
-                raise CliError(f"{self.csv_path}: the table's columns differ from this study's "
-                               f"({', '.join(header[:8])}...): write to a new output folder")
-            keep = [lines[0]]
-            for line in lines[1:]:
-                row = next(csv.reader([line]), None)
-                if not row or len(row) != len(self.columns) or row[0] in self.done:
-                    continue  # impossible with one writer; never duplicate a case
-                self.done[row[0]] = row[1]
-                keep.append(line)
-            if len(keep) != len(lines):
-                self._rewrite(self.csv_path, keep)
-        jl = self._complete_lines(self.jsonl_path)
-        keep, seen = [], set()
-        for line in jl:
-            try:
-                cid = json.loads(line)["case_id"]
-            except (ValueError, KeyError, TypeError):
-                continue
-            if cid in self.done and cid not in seen:
-                seen.add(cid)
+        """Read the table back (a restart): every complete line must be a row of this study's table (BadFile naming
+        the file and line otherwise); the finished cases go to ``done``. JSON lines whose case is not in
+        results.csv (written just before a crash, or dropped by --retry-failed) are dropped."""
+        records = self._records()
+        self.done, self.line_of = {}, {}
+        for no, cells in records[1:]:
+            self.done[cells[0]] = cells[1]
+            self.line_of[cells[0]] = no
+        jl = self._json_lines()
+        keep, seen = [], {}
+        for no, cid, line in jl:
+            if cid in seen:
+                raise BadFile(self.jsonl_path, f"line {no}: case {cid} repeats line {seen[cid]}")
+            seen[cid] = no
+            if cid in self.done:
                 keep.append(line)
         if len(keep) != len(jl):
             self._rewrite(self.jsonl_path, keep)
@@ -428,8 +505,9 @@ class Table:
 
     def drop(self, statuses):
         """Forget rows with these statuses (they run again)."""
-        lines = self._complete_lines(self.csv_path)
-        keep = [lines[0]] + [ln for ln in lines[1:] if next(csv.reader([ln]))[1] not in statuses]
+        records = self._records()
+        keep = [self._line(cells) for no, cells in records[:1]] + \
+            [self._line(cells) for no, cells in records[1:] if cells[1] not in statuses]
         self.fcsv.close()
         self.fjson.close()
         self._rewrite(self.csv_path, keep)
@@ -453,11 +531,11 @@ class Table:
         self.fcsv.close()
         self.fjson.close()
         rank = {cid: i for i, cid in enumerate(order)}
-        lines = self._complete_lines(self.csv_path)
-        rows = sorted(lines[1:], key=lambda ln: rank.get(next(csv.reader([ln]))[0], len(rank)))
-        self._rewrite(self.csv_path, [lines[0]] + rows)
-        jl = self._complete_lines(self.jsonl_path)
-        self._rewrite(self.jsonl_path, sorted(jl, key=lambda ln: rank.get(json.loads(ln)["case_id"], len(rank))))
+        records = self._records()
+        rows = sorted(records[1:], key=lambda rec: rank.get(rec[1][0], len(rank)))
+        self._rewrite(self.csv_path, [self._line(cells) for no, cells in records[:1] + rows])
+        jl = self._json_lines()
+        self._rewrite(self.jsonl_path, [ln for no, cid, ln in sorted(jl, key=lambda r: rank.get(r[1], len(rank)))])
 
     def close(self):
         for fh in (self.fcsv, self.fjson):
@@ -483,12 +561,14 @@ def _prepare(study, outdir):
     info = study.to_json()
     sj = outdir / "study.json"
     if sj.exists():
+        from sgim.readback import read_json
+
         try:
-            old = json.loads(sj.read_text())
-        except ValueError:
-            old = None
-        same = old is not None and all(old.get(k) == json.loads(json.dumps(info[k]))
-                                       for k in ("cases", "engine", "results"))
+            old = read_json(sj, "a study.json")
+        except BadFile:
+            lock.close()
+            raise
+        same = all(old.get(k) == json.loads(json.dumps(info[k])) for k in ("cases", "engine", "results"))
         if not same:
             lock.close()
             raise CliError(f"{outdir}: -o = {str(outdir)!r}: holds a different study (its study.json differs in "
@@ -515,6 +595,12 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
     try:
         lock = _prepare(study, outdir)
         table = Table(outdir, [p.path for p in study.params], study.results)
+        ids = {c.case_id for c in study.cases}
+        for cid, no in table.line_of.items():
+            if cid not in ids:
+                table.close()
+                lock.close()
+                raise BadFile(table.csv_path, f"line {no}: case {cid} is not a case of this study")
         if retry_failed:
             table.drop({"failed", "timeout"})
     except BaseException:

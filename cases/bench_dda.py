@@ -139,7 +139,7 @@ YADE_SCRIPT = r"""
 import sys, json, time, math
 import numpy as np
 from yade import polyhedra_utils
-d = np.load(sys.argv[1])
+d = np.load(sys.argv[1], allow_pickle=False)
 verts, starts, fixed = d['verts'], d['starts'], d['fixed']
 nsteps, dt, out = int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
 mat = PolyhedraMat(young=float(d['young']), poisson=0.25, density=2600.0, frictionAngle=math.radians(30.0))

@@ -182,7 +182,7 @@ def yade_case(work, L, r, cells, timeout):
     wall = time.perf_counter() - t
     if p.returncode != 0 or not out.exists():
         return {"status": "yade failed", "log_tail": (p.stdout + p.stderr)[-800:]}
-    z = np.load(out)
+    z = np.load(out, allow_pickle=False)
     X, R, sec = z["centres"], z["radii"], float(z["seconds"])
     inside = bool(np.all(X - R[:, None] >= -1e-9) and np.all(X + R[:, None] <= L + 1e-9))
     return {"status": "ok", "box_m": L, "radius_asked": r, "spheres_in_cell": cells, "spheres": int(len(R)),

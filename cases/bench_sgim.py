@@ -474,7 +474,7 @@ except ImportError:
 heff_path, par_path, out_path = sys.argv[1:4]
 P = json.load(open(par_path))
 LO, HI, R = P["lo"], P["hi"], P["r"]
-H = np.load(heff_path)
+H = np.load(heff_path, allow_pickle=False)
 NX, NY = H.shape
 HL = H.tolist()
 STEP = 2.0 * R
@@ -596,7 +596,7 @@ def bench_yade(work, quick, cache):
     if not ok:
         res["yade"] = {"status": "yade failed", "log_tail": tail}
         return res
-    with np.load(out) as z:
+    with np.load(out, allow_pickle=False) as z:
         pos, t_ro, n_y = z["pos"], float(z["t_regular_ortho"]), int(z["n"])
     iy = site_index(pos, lo, r, dims)
     isg = site_index(centres, lo, r, dims)

@@ -23,7 +23,6 @@ Written under temporary names and renamed into place.
 """
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -31,6 +30,9 @@ import re
 from pathlib import Path
 
 import numpy as np
+
+from sgim.cli import CliError
+from sgim.readback import BadFile, read_json
 
 FIXED = ("case_id", "status", "error", "wall_s", "rank")
 MC_METHODS = ("random", "lhs", "realisations", "monte-carlo", "montecarlo")
@@ -125,20 +127,24 @@ def _value(text):
 
 def read_results(outdir):
     """(header, rows) of OUTDIR/results.csv; rows are dicts keyed by column (results under their own name,
-    parameters as ``p:<path>``); lines with the wrong number of cells (a torn last line) and repeated case ids
-    are dropped. The status message (``error``) is kept as ``_message``."""
+    parameters as ``p:<path>``). A torn last line (no line end: a crash inside a write) is left out; any other
+    defect (a line that is not UTF-8 or CSV, the wrong number of cells, an unknown status, a case twice) raises
+    sgim.readback.BadFile naming the file and the line. The status message (``error``) is kept as ``_message``."""
+    from ._batch import check_table, csv_records
+
     path = Path(outdir) / "results.csv"
     if not path.is_file():
         return [], []
-    with open(path, newline="", encoding="utf-8") as fh:
-        lines = list(csv.reader(fh))
-    if not lines:
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise BadFile(path, f"cannot read ({exc.__class__.__name__})") from None
+    records = check_table(path, csv_records(path, data[:data.rfind(b"\n") + 1]))
+    if not records:
         return [], []
-    header = lines[0]
+    header = records[0][1]
     rows, seen = [], set()
-    for cells in lines[1:]:
-        if len(cells) != len(header):
-            continue
+    for _, cells in records[1:]:
         row = {}
         for k, (name, cell) in enumerate(zip(header, cells)):
             if name == "error" and k < len(FIXED) + 1 and "_message" not in row:
@@ -155,11 +161,11 @@ def read_results(outdir):
 
 
 def read_study(outdir):
+    """OUTDIR/study.json ({} when there is none; BadFile for one that is not a JSON object)."""
     path = Path(outdir) / "study.json"
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    if not path.exists():
         return {}
+    return read_json(path, "a study.json")
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -559,8 +565,8 @@ def main(argv=None):
         return 2
     try:
         print(write_report(argv[0]))
-    except FileNotFoundError as exc:
-        print(str(exc), file=sys.stderr)
+    except (FileNotFoundError, CliError) as exc:
+        print(f"cases.report: error: {exc}", file=sys.stderr)
         return 2
     return 0
 

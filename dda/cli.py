@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import CliError, _progress, assembled_folder, run_command  # the same CLI conventions as sgim
+from sgim.cli import CliError, _progress, assembled_folder, positive_int, run_command  # sgim's CLI conventions
 from sgim.machine import machine_info
 
 from .results import ENERGY_COLUMNS
@@ -88,9 +88,9 @@ def _model_colour(model, n):
     colour = getattr(model, "colour", None)
     if colour is None:
         try:
-            with np.load(model) as z:
+            with np.load(model, allow_pickle=False) as z:
                 colour = z["colour"] if "colour" in z.files else None
-        except (OSError, ValueError, TypeError):
+        except Exception:  # noqa: BLE001 - the colour is only for the pictures: without it they are plain
             colour = None
     return None if colour is None or len(colour) != n else np.asarray(colour)
 
@@ -121,7 +121,7 @@ def _run_spheres(scene, out, args, say, t0):
     from .render import render_meshes, save_mesh, write_pvd
     from .results import save_sphere_csv
 
-    ss, sim = scene.build_spheres()
+    ss, sim = scene.build_spheres(max_steps=positive_int(args.max_steps, "--max-steps"))  # step limit: SceneError
     colour = _model_colour(scene.spheres["model"], ss.n)
     if say:
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
@@ -199,7 +199,7 @@ def cmd_run(args):
         raise CliError(f"{out}: -o = {str(out)!r}: output exists and is not a folder")
     if scene.spheres:
         return _run_spheres(scene, out, args, say, t0)
-    bs, sim = scene.build()
+    bs, sim = scene.build(max_steps=positive_int(args.max_steps, "--max-steps"))  # step limit: SceneError
     if say:
         say(f"scene      {scene.name}: {bs.n_blocks} blocks ({len(sim.active)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s), {int(round(scene.duration / sim.dt))} steps")
@@ -242,6 +242,8 @@ def make_parser():
     r.add_argument("scene")
     r.add_argument("-o", "--output", required=True, help="output folder")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
+    r.add_argument("--max-steps", metavar="N", help="refuse a run of more than N steps (duration / dt; overrides "
+                                                    "the scene's [simulation] max_steps, default 1e8)")
     r.set_defaults(func=cmd_run)
     try:
         from .wedge import add_wedge_parser

@@ -7,7 +7,9 @@ written. Keys::
     [simulation]   duration (s, required), dt (0 or absent: automatic), safety = 0.5, gravity = [0, 0, -9.81],
                    local_damping = 0.0, record_every (default duration / 100), frames = 20 (VTU frames),
                    sleep = false (resting blocks stop being integrated), sleep_velocity (m/s), sleep_accel
-                   (m/s2), sleep_steps = 200 (see dda/simulation.py for the defaults)
+                   (m/s2), sleep_steps = 200 (see dda/simulation.py for the defaults), max_steps = 1e8 (a run
+                   whose duration / dt passes it is refused before it starts; dda/limits.py)
+    [limits]       max_steps: the same limit in the table sgim scenes use for theirs (give one of the two)
     [contact]      default law: kn (N/m per contact point, required), ks (default kn / 2), friction (deg),
                    cohesion (Pa), tensile (Pa), damping (ratio of critical)
     [[material]]   name, density (kg/m3) = 2600, E = 1e10, nu = 0.25
@@ -43,6 +45,7 @@ written. Keys::
 """
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +59,7 @@ from .simulation import ContactLaw
 OUTPUT_FORMATS = ("npz", "csv", "vtu", "png")
 TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact_pair", "block", "generate",
             "output", "render", "load", "spheres"}
+TOP_KEYS |= {"limits"}  # [limits] max_steps: the same as [simulation] max_steps (dda/limits.py)
 SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", "bond_shear_ratio", "bond_tensile",
                "bond_shear", "bond_damping", "bond_radius_factor", "joint_friction", "smooth_joints", "fixed_below"}
 SPHERE_KEYS |= {"load"}  # [[spheres.load]]: loaded regions (constant force or prescribed velocity)
@@ -94,9 +98,14 @@ class DDAScene:
     loads: list = field(default_factory=list)  # (block index, world point or None, force)
     sleep: dict = field(default_factory=dict)  # Simulation sleep keywords
     spheres: dict = field(default_factory=dict)  # [spheres]: model path, density, BondLaw, fixed regions
+    max_steps: int | None = None  # [simulation] max_steps or [limits] max_steps (None: dda.limits default)
+    max_steps_key: str = "simulation.max_steps"
 
-    def build_spheres(self):
-        """SphereSet and SphereSimulation of a scene with [spheres] (its blocks are fixed walls)."""
+    def build_spheres(self, max_steps=None, duration=None):
+        """SphereSet and SphereSimulation of a scene with [spheres] (its blocks are fixed walls).
+
+        SceneError when `duration` (default the scene's) at the run's dt passes the step limit (`max_steps`,
+        the --max-steps value, else the scene's; dda/limits.py)."""
         from .spheres import SphereSimulation, load_model
 
         sp = self.spheres
@@ -119,6 +128,9 @@ class DDAScene:
             walls = self.block_system()  # moving blocks: one coupled loop with the spheres
         sim = SphereSimulation(ss, self.law, walls=walls, gravity=self.gravity, dt=self.dt, safety=self.safety,
                                local_damping=self.local_damping, pair_laws=self.pair_laws)
+        from .limits import check_sphere_run
+
+        check_sphere_run(self, ss, sim, max_steps=max_steps, duration=duration)
         return ss, sim
 
     def fixed_spheres(self, centers):
@@ -157,13 +169,20 @@ class DDAScene:
                 bs.add_point_load(i, point, force)
         return bs
 
-    def build(self):
-        """BlockSystem and Simulation of the scene."""
+    def build(self, max_steps=None, duration=None, check=True):
+        """BlockSystem and Simulation of the scene.
+
+        SceneError when `duration` (default the scene's) at the run's dt passes the step limit (`max_steps`,
+        the --max-steps value, else the scene's; dda/limits.py); `check` false: no step check (the caller
+        makes its own)."""
+        from .limits import check_block_run
         from .simulation import Simulation
 
         bs = self.block_system()
         sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
                          local_damping=self.local_damping, pair_laws=self.pair_laws, **self.sleep)
+        if check:
+            check_block_run(self, sim, max_steps=max_steps, duration=duration)
         return bs, sim
 
 
@@ -310,12 +329,13 @@ def _read_spheres(rd, data, path):
 
         model = build_model(load_scene(mp))  # a bad sgim scene raises its own one-line SceneError
     else:
-        try:
-            from sgim.model import SphereModel
+        from sgim.model import SphereModel
+        from sgim.readback import BadFile
 
-            model = SphereModel.load(mp)
-        except (OSError, ValueError, KeyError) as exc:
-            rd.err("spheres.model", name, f"cannot read the model ({str(exc).splitlines()[0]})")
+        try:
+            model = SphereModel.load(mp)  # validated: a file that is not a usable model is one BadFile line
+        except BadFile as exc:
+            rd.err("spheres.model", name, exc.what)
     density = rd.number(st, "density", "spheres.density", default=2600.0, positive=True)
     below = []
     if "fixed_below" in st:
@@ -386,7 +406,8 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
 
     st = rd.table(data, "simulation", "simulation", required=True)
     rd.known(st, {"duration", "dt", "safety", "gravity", "local_damping", "record_every", "frames", "sleep",
-                  "sleep_velocity", "sleep_accel", "sleep_steps"}, "simulation")
+                  "sleep_velocity", "sleep_accel", "sleep_steps", "max_steps"}, "simulation")
+    max_steps, max_steps_key = _max_steps(rd, data, st)
     sleep = {"sleep": rd.boolean(st, "sleep", "simulation.sleep", False)}
     for k in ("sleep_velocity", "sleep_accel"):
         if k in st:
@@ -501,7 +522,25 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         record_every=record_every, frames=frames, formats=tuple(formats),
         width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
         height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources,
-        loads=loads, sleep=sleep, spheres=spheres)
+        loads=loads, sleep=sleep, spheres=spheres, max_steps=max_steps, max_steps_key=max_steps_key)
+
+
+def _max_steps(rd, data, st):
+    """(limit or None, key) from [simulation] max_steps or [limits] max_steps (not both)."""
+    from sgim.scene import read_limits
+
+    lim = read_limits(rd, data, {"max_steps"})
+    if "max_steps" in st:
+        if "max_steps" in lim:
+            rd.err("limits.max_steps", lim["max_steps"], "give either [simulation] max_steps or [limits] "
+                                                         "max_steps, not both")
+        v = st["max_steps"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v != int(v) or v < 1:
+            rd.err("simulation.max_steps", v, "must be a positive integer")
+        return int(v), "simulation.max_steps"
+    if "max_steps" in lim:
+        return lim["max_steps"], "limits.max_steps"
+    return None, "simulation.max_steps"
 
 
 BLOCK_KEYS = {"name", "fixed", "material", "velocity", "angular_velocity", "prescribed", "force", "shape", "size", "center", "rotation_axis",

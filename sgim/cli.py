@@ -55,11 +55,18 @@ def cmd_build(args):
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: output exists and is not a folder")
+    from .limits import check_build
+
+    # spheres and memory estimated before any progress line: a refused build prints its one line only
+    t_parse = time.perf_counter() - t0
+    est = check_build(scene, max_spheres=positive_int(args.max_spheres, "--max-spheres"))
     timer = Timer(say)
-    timer.t["parse"] = time.perf_counter() - t0
+    timer.t["parse"] = t_parse
+    timer.t["estimate"] = time.perf_counter() - t0 - t_parse
     if say:
         say(f"parse      {timer.t['parse']:7.2f} s  {args.scene}")
-    model = build_model(scene, timer=timer)
+        say(f"{est.line()} ({timer.t['estimate']:.2f} s)")
+    model = build_model(scene, timer=timer, estimate=est)
     with assembled_folder(out) as tmp:
         model.save(tmp / "model.npz")
         timer.lap("write npz", str(out / "model.npz"))
@@ -122,6 +129,19 @@ def cmd_dfn(args):
     return 0
 
 
+def positive_int(text, flag):
+    """The value of a count flag (`--max-spheres 12000000` or `1.2e7`), None when not given; CliError otherwise."""
+    if text is None:
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (v >= 1 and v < 2 ** 63 and v == int(v)):
+        raise CliError(f"{flag} = {text!r}: must be a positive integer (e.g. 12000000 or 1.2e7)")
+    return int(v)
+
+
 @contextmanager
 def assembled_folder(out):
     """A command's output folder, assembled under a temporary name beside ``out`` (``.NAME.partPID``): on
@@ -155,10 +175,7 @@ def _load_model(path):
     p = Path(path)
     if not p.is_file():
         raise CliError(f"{p}: MODEL = {str(path)!r}: file not found")
-    try:
-        return SphereModel.load(p)
-    except Exception as exc:  # a broken or foreign file
-        raise CliError(f"{p}: MODEL = {str(path)!r}: not a readable model.npz ({exc.__class__.__name__})") from None
+    return SphereModel.load(p)  # a broken, foreign or inconsistent file: BadFile (one line)
 
 
 def cmd_show(args):
@@ -174,8 +191,9 @@ def cmd_show(args):
     out = Path(args.output)
     if out.parent and not out.parent.exists():
         raise CliError(f"{out}: -o = {str(out)!r}: folder {out.parent} does not exist")
+    title = model.meta.get("scene")
     res = render(model, out, hide_intact=args.hide_intact, translucent=args.translucent, cut_away=args.cut_away,
-                 width=args.width, height=args.height, title=model.meta.get("scene"))
+                 width=args.width, height=args.height, title=None if title is None else str(title))
     if not args.quiet:
         print(f"{out}: {res['drawn']} spheres drawn of {res['selected']} selected")
     return 0
@@ -188,20 +206,20 @@ def cmd_info(args):
         print(json.dumps({**c, "meta": model.meta}, indent=2))
         return 0
     m = model.meta
-    pk = m.get("packing", {})
+    pk = _table(m, "packing")
     print(f"model      {args.model}")
     print(f"scene      {m.get('scene', '?')}  ({m.get('generator', '?')})")
     if pk.get("kind") == "random":  # sgim/rpack.py statistics
-        st = pk.get("statistics", {})
-        les = st.get("largest_empty_sphere") or {}
+        st = _table(pk, "statistics")
+        les = _table(st, "largest_empty_sphere")
         print(f"packing    random  r = {st.get('radius_min', '?')} .. {st.get('radius_max', '?')}  density "
-              f"{st.get('density', float('nan')):.4f}  coordination {st.get('coordination', float('nan')):.3f}  "
-              f"max overlap {st.get('max_overlap', float('nan')):.1e}  largest empty sphere "
-              f"{les.get('radius') or float('nan'):.4g} ({les.get('relative_max') or float('nan'):.3f} x local r)")
+              f"{_num(st.get('density'), '.4f')}  coordination {_num(st.get('coordination'), '.3f')}  "
+              f"max overlap {_num(st.get('max_overlap'), '.1e')}  largest empty sphere "
+              f"{_num(les.get('radius'), '.4g')} ({_num(les.get('relative_max'), '.3f')} x local r)")
     else:
         print(f"packing    {pk.get('kind', '?')}  r = {pk.get('radius', '?')}  lattice sites {pk.get('lattice_sites', '?')}")
     print(f"spheres    {c['spheres']}  intact {c['intact']}  red {c['red']}  green {c['green']}  blue {c['blue']}")
-    print(f"contacts   {c['bonds']}  bonded {c['bonded']}  cut {c['cut']}  (rule {m.get('bonds', {}).get('rule', '?')})")
+    print(f"contacts   {c['bonds']}  bonded {c['bonded']}  cut {c['cut']}  (rule {_table(m, 'bonds').get('rule', '?')})")
     print(f"discs      {c['discontinuities']}  memberships {c['memberships']}")
     for k, name in enumerate(model.disc_name):
         kind = "fault" if model.disc_thickness[k] > 0 else "joint"
@@ -211,9 +229,22 @@ def cmd_info(args):
         d = float(srf["surf_thickness"][q])
         nf = int(srf["surf_face_start"][q + 1] - srf["surf_face_start"][q])
         print(f"  [{k}] {srf['surf_name'][q]} ({'fault' if d > 0 else 'joint'}, surface of {nf} triangles, d = {d:g})")
-    for c in m.get("cavities", []):
-        print(f"cavity     {c['name']} ({c['source']}, {c['faces']} triangles): {c['spheres_removed']} spheres removed")
+    cavities = m.get("cavities")
+    for c in cavities if isinstance(cavities, list) else []:
+        c = c if isinstance(c, dict) else {}
+        print(f"cavity     {c.get('name', '?')} ({c.get('source', '?')}, {c.get('faces', '?')} triangles): "
+              f"{c.get('spheres_removed', '?')} spheres removed")
     return 0
+
+
+def _table(d, key):
+    """d[key] when it is a dict (model.meta is free-form JSON: a missing or odd entry shows as '?')."""
+    v = d.get(key) if isinstance(d, dict) else None
+    return v if isinstance(v, dict) else {}
+
+
+def _num(v, fmt):
+    return format(v, fmt) if isinstance(v, (int, float)) and not isinstance(v, bool) else "nan" if v is None else "?"
 
 
 def make_parser():
@@ -225,6 +256,8 @@ def make_parser():
     b.add_argument("--quiet", action="store_true", help="no progress lines")
     b.add_argument("--json", action="store_true", help="print a JSON summary (counts, bonds, timings)")
     b.add_argument("--formats", help="comma list of npz,vtu,txt,png (default: the scene's [output] formats)")
+    b.add_argument("--max-spheres", metavar="N", help="refuse a build estimated past N spheres (overrides the "
+                                                      "scene's [limits] max_spheres; default: see sgim/limits.py)")
     b.set_defaults(func=cmd_build)
     s = sub.add_parser("show", help="render a model to PNG")
     s.add_argument("model")
@@ -254,15 +287,19 @@ def run_command(prog, args, bad_input=()):
     """``args.func(args)`` under the CLI conventions of every command of the project: bad input (SceneError,
     CliError and the `bad_input` exception types) prints one line ``PROG: error: ...`` and gives exit status 2;
     a reader closing the pipe (e.g. ``head``) ends the command quietly with status 0."""
-    from .scene import SceneError
-
     try:
         return args.func(args)
-    except (SceneError, CliError, *bad_input) as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     except BrokenPipeError:
         return reader_gone()
+    except Exception as exc:
+        # SceneError can only come from sgim.scene once it is imported: looked up, not imported here (its
+        # geometry imports numba, a second of start-up for a command that may fail on its first file)
+        scene = sys.modules.get("sgim.scene")
+        bad = (CliError, *bad_input) + ((scene.SceneError,) if scene is not None else ())
+        if not isinstance(exc, bad):
+            raise
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
 
 def main(argv=None):

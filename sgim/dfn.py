@@ -817,28 +817,36 @@ def load_network(path, lo, hi, scene_path="<scene>", key="dfn.file"):
     if path.suffix.lower() == ".json":
         try:
             doc = json.loads(text)
-        except json.JSONDecodeError:
-            _bad(scene_path, key, str(path), "not valid JSON")
+        except json.JSONDecodeError as exc:
+            _bad(scene_path, key, str(path), f"not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})")
+        except (ValueError, RecursionError) as exc:
+            _bad(scene_path, key, str(path), f"not valid JSON ({exc.__class__.__name__})")
         fr = doc.get("fractures") if isinstance(doc, dict) else None
         if not isinstance(fr, list):
             _bad(scene_path, key, str(path), "a network JSON needs a 'fractures' list")
         for i, f in enumerate(fr):
             if not isinstance(f, dict):
-                _bad(scene_path, f"{key} (fracture {i})", f, "must be an object")
+                _bad(scene_path, f"{key} (fracture {i + 1})", f, "must be an object")
             c, nrm = f.get("centre"), f.get("normal")
             if not (isinstance(c, list) and len(c) == 3 and isinstance(nrm, list) and len(nrm) == 3):
-                _bad(scene_path, f"{key} (fracture {i})", f.get("id"), "needs 'centre' and 'normal' lists of 3")
+                _bad(scene_path, f"{key} (fracture {i + 1})", f.get("id"), "needs 'centre' and 'normal' lists of 3")
             rows.append((f.get("id"), f.get("set", ""), *c, *nrm, f.get("radius"), f.get("thickness", 0.0)))
         where = "fracture"
     elif path.suffix.lower() == ".csv":
         reader = csv.DictReader(text.splitlines())
         need = ("id", "cx", "cy", "cz", "nx", "ny", "nz", "radius")
-        missing = [c for c in need if c not in (reader.fieldnames or [])]
-        if missing:
-            _bad(scene_path, key, str(path), f"CSV lacks the column(s) {', '.join(missing)}")
-        for r in reader:
-            rows.append((r["id"], r.get("set") or "", r["cx"], r["cy"], r["cz"], r["nx"], r["ny"], r["nz"],
-                         r["radius"], r.get("thickness") or 0.0))
+        try:
+            missing = [c for c in need if c not in (reader.fieldnames or [])]
+            if missing:
+                _bad(scene_path, key, str(path), f"CSV lacks the column(s) {', '.join(missing)}")
+            for r in reader:
+                if any(str(c).strip() for c in r.get(None) or ()):  # more cells than columns: another table
+                    _bad(scene_path, f"{key} (row {len(rows) + 1})", r[None], f"more cells than the "
+                         f"{len(reader.fieldnames)} columns")
+                rows.append((r["id"], r.get("set") or "", r["cx"], r["cy"], r["cz"], r["nx"], r["ny"], r["nz"],
+                             r["radius"], r.get("thickness") or 0.0))
+        except csv.Error as exc:
+            _bad(scene_path, f"{key} (line {reader.line_num})", str(path), f"not a readable CSV table ({exc})")
         where = "row"
     else:
         _bad(scene_path, key, str(path), "network file must end in .csv or .json")

@@ -138,17 +138,11 @@ class SphereModel:
 
     @classmethod
     def load(cls, path):
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in cls.ARRAYS if k not in z.files]
-            if missing:
-                raise ValueError(f"{path}: not a model file (missing {', '.join(missing)})")
-            kw = {k: z[k] for k in cls.ARRAYS}
-            kw["disc_name"] = [str(s) for s in z["disc_name"]] if "disc_name" in z.files else []
-            kw["meta"] = json.loads(str(z["meta"])) if "meta" in z.files else {}
-            kw["scene_toml"] = str(z["scene_toml"]) if "scene_toml" in z.files else ""
-            kw["surfaces"] = {k: ([str(x) for x in z[k]] if k == "surf_name" else z[k])
-                              for k in z.files if k.startswith("surf_") or k == "discontinuity_kind"}
-        return cls(**kw)
+        """The model in the model.npz `path`, validated (:func:`check_model`): a file that is not a readable
+        model raises sgim.readback.BadFile (a CliError: ``FILE: what is wrong``)."""
+        from .readback import read_npz
+
+        return cls(**check_model(path, read_npz(path, "a model.npz")))
 
     # -- exports -------------------------------------------------------------
     def save_vtu(self, path):
@@ -182,6 +176,94 @@ class SphereModel:
                 fh.write("# id1 id2 bonded(1/0) cut_by(discontinuity index, -1 none)\n")
                 _write_rows(fh, "%d %d %d %d",
                             [self.bonds[:, 0] + 1, self.bonds[:, 1] + 1, self.bonded.astype(int), self.cut_by])
+
+
+SURFACE_KEYS = ("discontinuity_kind", "surf_index", "surf_name", "surf_thickness", "surf_vertices", "surf_faces",
+                "surf_vertex_start", "surf_face_start")
+
+
+def check_model(path, arrays, kind="a model.npz"):
+    """The SphereModel keywords of the arrays `arrays` read from the model.npz `path`, each checked against the
+    layout of the module docstring: every array present, of its dtype kind and shape, lengths agreeing (n spheres,
+    m pairs, k memberships, d discs, s surfaces), centres, radii and disc geometry finite, radii > 0, colour and
+    membership codes valid, every sphere, pair, discontinuity and vertex index in range; meta a JSON object.
+    Raises sgim.readback.BadFile naming the file and the first defect. Used by every reader of a model
+    (SphereModel.load)."""
+    from .readback import Arrays, parse_json
+
+    A = Arrays(path, arrays, kind)
+    A.missing(SphereModel.ARRAYS)
+    kw = {}
+    c = kw["centers"] = A.real("centers", (None, 3))
+    n = len(c)
+    sph = f"the model has {n} spheres"
+    kw["radii"] = A.real("radii", (n,), positive=True, per="one per sphere of centers")
+    kw["colour"] = A.integer("colour", (n,), lo=0, hi=4, why="colour codes 0 intact, 1 red, 2 green, 3 blue",
+                             per="one per sphere", dtype=np.int8)
+    kw["disc_radius"] = A.real("disc_radius", (None,), positive=True)
+    d = len(kw["disc_radius"])
+    kw["disc_centre"] = A.real("disc_centre", (d, 3), per="one per disc")
+    dn = kw["disc_normal"] = A.real("disc_normal", (d, 3), per="one per disc")
+    off = np.abs(np.linalg.norm(dn, axis=1) - 1.0) > 1e-6
+    if off.any():
+        A.fail(f"disc_normal[{int(np.argmax(off))}] = {dn[int(np.argmax(off))].tolist()}: must be a unit vector")
+    kw["disc_thickness"] = A.real("disc_thickness", (d,), nonneg=True, per="one per disc")
+    kw["disc_name"] = A.strings("disc_name", (d,), per="one per disc") if A.has("disc_name") else []
+    surfaces = {}
+    if any(A.has(k) for k in SURFACE_KEYS):
+        A.missing(SURFACE_KEYS)
+        si = A.integer("surf_index", (None,), dtype=np.int32)
+        s = len(si)
+        if not np.array_equal(si, np.arange(d, d + s)):
+            A.fail(f"surf_index = {si.tolist()[:8]}: expected the discontinuity indices {d} .. {d + s - 1} "
+                   f"(after the {d} discs)")
+        nd = d + s
+        surfaces["discontinuity_kind"] = A.integer("discontinuity_kind", (nd,), lo=0, hi=2,
+                                                   why="0 disc, 1 surface", per="one per discontinuity",
+                                                   dtype=np.int8)
+        surfaces["surf_index"] = si
+        surfaces["surf_name"] = A.strings("surf_name", (s,), per="one per surface")
+        surfaces["surf_thickness"] = A.real("surf_thickness", (s,), nonneg=True, per="one per surface")
+        sv = surfaces["surf_vertices"] = A.real("surf_vertices", (None, 3))
+        vs = surfaces["surf_vertex_start"] = A.integer("surf_vertex_start", (s + 1,), lo=0, hi=len(sv) + 1,
+                                                       per="one more than the surfaces")
+        sf = A.integer("surf_faces", (None, 3), lo=0, hi=len(sv), why=f"{len(sv)} surface vertices")
+        fs = surfaces["surf_face_start"] = A.integer("surf_face_start", (s + 1,), lo=0, hi=len(sf) + 1,
+                                                     per="one more than the surfaces")
+        for name, st, total in (("surf_vertex_start", vs, len(sv)), ("surf_face_start", fs, len(sf))):
+            if st[0] != 0 or st[-1] != total or np.any(np.diff(st) < 0):
+                A.fail(f"{name} = {st.tolist()[:8]}: must rise from 0 to {total}")
+        owner = np.repeat(np.arange(s), np.diff(fs))
+        outside = (sf < vs[owner, None]) | (sf >= vs[owner + 1, None])
+        if outside.any():
+            f = int(np.argmax(outside.any(1)))
+            A.fail(f"surf_faces[{f}] = {sf[f].tolist()}: refers to a vertex outside its surface's block "
+                   f"{int(vs[owner[f]])} .. {int(vs[owner[f] + 1]) - 1}")
+        surfaces["surf_faces"] = sf
+    else:
+        nd = d
+    disc = f"the model has {nd} discontinuities"
+    kw["colour_source"] = A.integer("colour_source", (n,), lo=-1, hi=nd, why=disc, per="one per sphere",
+                                    dtype=np.int32)
+    b = kw["bonds"] = A.integer("bonds", (None, 2), lo=0, hi=n, why=sph)
+    m = len(b)
+    same = b[:, 0] == b[:, 1]
+    if same.any():
+        A.fail(f"bonds[{int(np.argmax(same))}] = {b[int(np.argmax(same))].tolist()}: a sphere paired with itself")
+    kw["bonded"] = A.boolean("bonded", (m,), per="one per pair of bonds")
+    kw["cut_by"] = A.integer("cut_by", (m,), lo=-1, hi=nd, why=disc, per="one per pair of bonds", dtype=np.int32)
+    kw["member_sphere"] = A.integer("member_sphere", (None,), lo=0, hi=n, why=sph)
+    k = len(kw["member_sphere"])
+    kw["member_disc"] = A.integer("member_disc", (k,), lo=0, hi=nd, why=disc, per="one per membership",
+                                  dtype=np.int32)
+    kw["member_kind"] = A.integer("member_kind", (k,), lo=1, hi=4, why="1 inside, 2 green side, 3 blue side",
+                                  per="one per membership", dtype=np.int8)
+    kw["member_offset"] = A.real("member_offset", (k,), per="one per membership")
+    meta = A.text("meta") if A.has("meta") else "{}"
+    kw["meta"] = parse_json(path, meta, where="meta")
+    kw["scene_toml"] = A.text("scene_toml") if A.has("scene_toml") else ""
+    kw["surfaces"] = surfaces
+    return kw
 
 
 def _write_rows(fh, fmt, cols, chunk=200_000):
