@@ -2,9 +2,10 @@
 
 The project's kernels that decide topology or membership (which side of a plane a sphere centre lies on,
 which features of two blocks touch, which blocks a cut makes) must give the same answer on every machine.
-IEEE-754 makes +, -, *, / and sqrt correctly rounded everywhere, and numba kernels compiled without
-fast-math keep the order of operations as written (no fused multiply-add, no reassociation), so such code
-is bit-reproducible. Three things are not, and are kept out of every value that feeds a decision:
+IEEE-754 makes +, -, *, / and sqrt correctly rounded everywhere (numpy's element-wise operations too), and
+numba kernels compiled without fast-math keep the order of operations as written (no fused multiply-add, no
+reassociation), so such code is bit-reproducible. Three things are not, and are kept out of every value that
+feeds a decision:
 
 - BLAS and LAPACK (numpy's ``@``, ``np.dot``, ``np.linalg.det`` / ``eigh`` / ``inv``, and
   ``np.linalg.norm`` of a 1-D array, which calls ``dot``): OpenBLAS picks a kernel per CPU (with or
@@ -16,7 +17,7 @@ is bit-reproducible. Three things are not, and are kept out of every value that 
 
 This module holds the small pieces of linear algebra and trigonometry that the geometry needs, written so
 that only correctly rounded operations (and, for the angles, the C library's ``sin`` / ``cos`` of a reduced
-argument, with exact values at multiples of 45 degrees) decide their results. docs/ARCHITECTURE.md
+argument, with exact values at multiples of 30 and 45 degrees) decide their results. docs/ARCHITECTURE.md
 ("Same answer on every CPU") lists which kernels may use fast-math and why.
 """
 from __future__ import annotations
@@ -24,37 +25,28 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 
-@njit(cache=True)
-def det3(a):
+def det3(a) -> float:
     """Determinant of a 3 x 3 matrix (cofactor expansion along the first row)."""
-    return (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
-            - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
-            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
-
-
-@njit(cache=True)
-def _rows_times(v, m, out):
-    for i in range(v.shape[0]):
-        for j in range(m.shape[1]):
-            s = 0.0
-            for k in range(v.shape[1]):
-                s += v[i, k] * m[k, j]
-            out[i, j] = s
-    return out
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = (tuple(map(float, row)) for row in np.asarray(a))
+    return (a00 * (a11 * a22 - a12 * a21)
+            - a01 * (a10 * a22 - a12 * a20)
+            + a02 * (a10 * a21 - a11 * a20))
 
 
 def matmul(a, b):
-    """a @ b for 1-D or 2-D float arrays, summed in index order (no BLAS)."""
+    """a @ b for 1-D or 2-D float arrays without BLAS: the products of each inner index are added in index
+    order with numpy's element-wise operations (correctly rounded on every CPU)."""
     a = np.asarray(a, float)
     b = np.asarray(b, float)
-    a2 = np.ascontiguousarray(a.reshape(1, -1) if a.ndim == 1 else a)
-    b2 = np.ascontiguousarray(b.reshape(-1, 1) if b.ndim == 1 else b)
+    a2 = a.reshape(1, -1) if a.ndim == 1 else a
+    b2 = b.reshape(-1, 1) if b.ndim == 1 else b
     if a2.shape[1] != b2.shape[0]:
         raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not match")
-    out = _rows_times(a2, b2, np.empty((a2.shape[0], b2.shape[1])))
+    out = np.zeros((a2.shape[0], b2.shape[1]))
+    for k in range(a2.shape[1]):
+        out += a2[:, k, None] * b2[None, k, :]
     if a.ndim == 1 and b.ndim == 1:
         return float(out[0, 0])
     if a.ndim == 1:
@@ -66,66 +58,54 @@ def matmul(a, b):
 
 def norm(x) -> float:
     """Euclidean length of a vector, summed in index order (np.linalg.norm of a 1-D array calls BLAS dot)."""
-    x = np.asarray(x, float).ravel()
     s = 0.0
-    for c in x:
+    for c in np.asarray(x, float).ravel():
         s += float(c) * float(c)
     return math.sqrt(s)
 
 
-@njit(cache=True)
-def _jacobi3(s, w, vec):
-    """Eigen-decomposition of a symmetric 3 x 3 matrix by cyclic Jacobi rotations (fixed sweep order)."""
-    a = s.copy()
-    for i in range(3):
-        for j in range(3):
-            vec[i, j] = 1.0 if i == j else 0.0
-    scale = abs(a[0, 0]) + abs(a[1, 1]) + abs(a[2, 2]) + abs(a[0, 1]) + abs(a[0, 2]) + abs(a[1, 2])
+def _jacobi3(s):
+    """Eigenvalues and eigenvectors (columns) of a symmetric 3 x 3 matrix by cyclic Jacobi rotations in a
+    fixed order (plain floats, correctly rounded operations only)."""
+    a = [[float(s[i][j]) for j in range(3)] for i in range(3)]
+    vec = [[1.0 if i == j else 0.0 for j in range(3)] for i in range(3)]
+    scale = sum(abs(a[i][j]) for i in range(3) for j in range(i, 3))
     for _sweep in range(64):
-        off = abs(a[0, 1]) + abs(a[0, 2]) + abs(a[1, 2])
+        off = abs(a[0][1]) + abs(a[0][2]) + abs(a[1][2])
         if off <= 1e-300 or off <= 1e-18 * scale:
             break
-        for p in range(2):
-            for q in range(p + 1, 3):
-                apq = a[p, q]
-                if apq == 0.0:
-                    continue
-                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
-                t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                if theta < 0.0:
-                    t = -t
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                sn = t * c
-                for k in range(3):  # A <- A J (columns p, q)
-                    akp = a[k, p]
-                    akq = a[k, q]
-                    a[k, p] = c * akp - sn * akq
-                    a[k, q] = sn * akp + c * akq
-                for k in range(3):  # A <- J^T A (rows p, q)
-                    apk = a[p, k]
-                    aqk = a[q, k]
-                    a[p, k] = c * apk - sn * aqk
-                    a[q, k] = sn * apk + c * aqk
-                a[p, q] = 0.0
-                a[q, p] = 0.0
-                for k in range(3):
-                    vkp = vec[k, p]
-                    vkq = vec[k, q]
-                    vec[k, p] = c * vkp - sn * vkq
-                    vec[k, q] = sn * vkp + c * vkq
-    for i in range(3):
-        w[i] = a[i, i]
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p][q]
+            if apq == 0.0:
+                continue
+            theta = (a[q][q] - a[p][p]) / (2.0 * apq)
+            t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            if theta < 0.0:
+                t = -t
+            c = 1.0 / math.sqrt(t * t + 1.0)
+            sn = t * c
+            for k in range(3):  # A <- A J (columns p, q)
+                akp, akq = a[k][p], a[k][q]
+                a[k][p] = c * akp - sn * akq
+                a[k][q] = sn * akp + c * akq
+            for k in range(3):  # A <- J^T A (rows p, q)
+                apk, aqk = a[p][k], a[q][k]
+                a[p][k] = c * apk - sn * aqk
+                a[q][k] = sn * apk + c * aqk
+            a[p][q] = a[q][p] = 0.0
+            for k in range(3):
+                vkp, vkq = vec[k][p], vec[k][q]
+                vec[k][p] = c * vkp - sn * vkq
+                vec[k][q] = sn * vkp + c * vkq
+    return np.array([a[0][0], a[1][1], a[2][2]]), np.array(vec)
 
 
 def eigh3(s):
     """(eigenvalues ascending, unit eigenvectors as columns) of a symmetric 3 x 3 matrix, the same bits on
     every CPU (np.linalg.eigh calls LAPACK). Each eigenvector's largest component is made positive and the
     frame right-handed (the last column flipped when needed)."""
-    s = np.ascontiguousarray(s, float).reshape(3, 3)
-    s = 0.5 * (s + s.T)
-    w = np.empty(3)
-    vec = np.empty((3, 3))
-    _jacobi3(s, w, vec)
+    s = np.asarray(s, float).reshape(3, 3)
+    w, vec = _jacobi3(0.5 * (s + s.T))
     order = sorted(range(3), key=lambda k: (w[k], k))
     w = w[order]
     vec = vec[:, order]
