@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 
-from sgim.cli import CliError, _progress, run_command
+from sgim.cli import CliError, _progress, positive_int, run_command
 
 EXIT_ENGINE = 3
 
@@ -21,7 +21,8 @@ def cmd_export(args):
 
     say = _progress(args.quiet)
     overrides = {"duration": args.duration, "dt": args.dt, "record_every": args.record_every}
-    info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say)
+    info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say,
+                  max_steps=positive_int(args.max_steps, "--max-steps"))
     if args.json:
         print(json.dumps(info, indent=2))
     return 0
@@ -65,6 +66,8 @@ def main(argv=None):
     p.add_argument("--duration", type=float, help="run length [s] (overrides the scene)")
     p.add_argument("--dt", type=float, help="time step [s] (overrides the scene)")
     p.add_argument("--record-every", type=float, help="record interval [s]")
+    p.add_argument("--max-steps", metavar="N", help="refuse a deck of more than N steps (duration / dt; overrides "
+                                                    "the scene's [simulation] max_steps, default 1e8)")
     p.add_argument("--json", action="store_true", help="print deck.json")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_export)

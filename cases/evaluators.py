@@ -314,6 +314,7 @@ def sgim_volume(scene_path, case_dir, params):
     lattice sites: exact for a cubic lattice that fills the box), against the exact volume below the surface
     (:func:`volume_below_surface`); error_volume = kept / exact - 1."""
     from sgim.excavate import FacetSet, kept_sites
+    from sgim.limits import check_build
     from sgim.packing import lattice_for
     from sgim.scene import SceneError, load_scene
 
@@ -321,6 +322,7 @@ def sgim_volume(scene_path, case_dir, params):
     if scene.packing.kind == "random" or len(scene.excavations) != 1 or scene.cavities:
         raise SceneError(scene_path, "excavation", len(scene.excavations), "sgim-volume needs a lattice packing "
                          "and exactly one excavation surface (no cavities)")
+    check_build(scene)  # the sphere and memory limits of sgim build (sgim/limits.py), before the lattice
     surf = scene.excavations[0]
     try:
         exact = volume_below_surface(surf.vertices, surf.faces, scene.domain.min, scene.domain.max)

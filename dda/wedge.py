@@ -46,6 +46,10 @@ class WedgeInputError(ValueError):
     """Bad command-line value: one line, exit status 2."""
 
 
+def _short(value):
+    return f"{value:g}" if isinstance(value, float) else repr(value)
+
+
 def parse_orientation(text, what):
     """``"45/005"`` -> (45.0, 5.0); dip in [0, 90], dip direction in [0, 360)."""
     parts = str(text).split("/")
@@ -126,6 +130,7 @@ class WedgeModel:
         size = float(np.ptp(self.geom.vertices, axis=0).max())
         weight = self.density * self.geom.volume * G
         self.kn = float(kn) if kn is not None else weight / (3.0 * penetration * size)
+        self.penetration = float(penetration)
         self.duration = float(duration)
         self.damping = float(damping)
         self.safety = float(safety)
@@ -143,17 +148,40 @@ class WedgeModel:
         build up, and a wedge near its limit (FS close to 1) would carry that slip on at nearly constant speed,
         which hides whether it accelerates."""
         if self._settled is None:
-            from .simulation import ContactLaw, Simulation
-            from .system import BlockSystem
-
-            bs = BlockSystem()
-            for s in self.specs:
-                bs.add_block(s, density=self.density)
-            law = ContactLaw(kn=self.kn, ks=self.kn / 2, friction_deg=self.settle_friction, damping=self.damping)
-            sim = Simulation(bs, law, gravity=(0.0, 0.0, -G), safety=self.safety)
+            sim = self._fresh()
             sim.run(self.settle, record_every=self.settle)
             self._settled = sim
         return self._settled
+
+    def _fresh(self):
+        """The wedge's Simulation before settling."""
+        from .simulation import ContactLaw, Simulation
+        from .system import BlockSystem
+
+        bs = BlockSystem()
+        for s in self.specs:
+            bs.add_block(s, density=self.density)
+        law = ContactLaw(kn=self.kn, ks=self.kn / 2, friction_deg=self.settle_friction, damping=self.damping)
+        return Simulation(bs, law, gravity=(0.0, 0.0, -G), safety=self.safety)
+
+    def check_steps(self, max_steps=None, kn_given=True):
+        """Refuse (WedgeInputError, one line) a trial or the settling run whose steps pass the limit
+        (`max_steps`, the --max-steps value, default dda.limits.DEFAULT_MAX_STEPS), before anything runs.
+        `kn_given`: kn came from --kn (else from --penetration, which the message then names)."""
+        from sgim.scene import SceneError
+
+        from .limits import check
+
+        sim = self._fresh()
+        key, value, fix = ("--kn", self.kn, None) if kn_given else ("--penetration", self.penetration,
+                                                                     "raise --penetration")
+        try:
+            for dur, dkey in ((self.duration, "--duration"), (self.settle, "settle")):
+                check("dda wedge", dur, sim.dt, dt_key=key, dt_value=value, auto_dt=True, dt_crit=sim.dt_crit,
+                      safety=self.safety, max_steps=max_steps, duration_key=dkey,
+                      raise_limit="raise --max-steps", dt_fix=fix)
+        except SceneError as exc:
+            raise WedgeInputError(f"{exc.key} = {_short(exc.value)}: {exc.message}") from None
 
     def run(self, phi):
         """Displacements along the line of intersection at 1/2, 3/4 and 1 of the duration, counted from the
@@ -177,9 +205,11 @@ class WedgeModel:
 
 
 def dda_critical_friction(joint_a, joint_b, face, top=(0.0, 0.0), height=10.0, friction=25.0, unit_weight=25.506,
-                          tol=0.05, step=2.0, progress=None, **model_kw):
-    """DDA critical friction angle and factor of safety; returns a dict of numbers (see run_wedge)."""
+                          tol=0.05, step=2.0, progress=None, max_steps=None, **model_kw):
+    """DDA critical friction angle and factor of safety; returns a dict of numbers (see run_wedge).
+    WedgeInputError before any run when a trial would pass the step limit (`max_steps`, dda/limits.py)."""
     model = WedgeModel(joint_a, joint_b, face, top, height, unit_weight, **model_kw)
+    model.check_steps(max_steps, kn_given=model_kw.get("kn") is not None)
     start = time.perf_counter()
     phi_c, trials = bracket_and_bisect(model.slides, friction, step=step, tol=tol, progress=progress)
     return dict(phi_crit_dda=phi_c, fs_dda=math.tan(math.radians(friction)) / math.tan(math.radians(phi_c)),
@@ -207,6 +237,8 @@ def add_wedge_parser(subparsers):
     p.add_argument("--kn", type=float, default=None, help="normal penalty stiffness per contact point [N/m]")
     p.add_argument("--penetration", type=float, default=1e-5,
                    help="static contact compression / wedge size that sets kn when --kn is not given")
+    p.add_argument("--max-steps", type=float, default=None, metavar="N",
+                   help="refuse trials of more than N steps (--duration / dt; default 1e8)")
     p.add_argument("--analytical-only", action="store_true", help="skip the DDA search")
     p.add_argument("--json", action="store_true", help="print the results as JSON numbers")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -230,6 +262,9 @@ def _check_args(args):
             raise WedgeInputError(f"{name} = {val!r}: must be in ({lo}, {hi})")
     if args.kn is not None and not (math.isfinite(args.kn) and args.kn > 0):
         raise WedgeInputError(f"--kn = {args.kn!r}: must be > 0")
+    m = getattr(args, "max_steps", None)
+    if m is not None and not (m >= 1 and m < 2 ** 63 and m == int(m)):
+        raise WedgeInputError(f"--max-steps = {m!r}: must be a positive integer")
     return ja, jb, face, top
 
 
@@ -258,7 +293,11 @@ def run_wedge(args) -> int:
             out.update(dda_critical_friction(ja, jb, face, top, args.height, args.friction, args.unit_weight,
                                              tol=args.tolerance, step=args.step, duration=args.duration,
                                              kn=args.kn, penetration=args.penetration,
-                                             progress=None if args.quiet else say))
+                                             progress=None if args.quiet else say,
+                                             max_steps=None if args.max_steps is None else int(args.max_steps)))
+        except WedgeInputError as exc:  # the step limit
+            print(f"dda wedge: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
         except BlowUpError as exc:
             print(f"dda wedge: the DDA run failed: {str(exc).splitlines()[0]}", file=sys.stderr)
             return 1

@@ -10,6 +10,7 @@ from . import __version__
 from .cavities import carve
 from .cutting import Discs, SphereGrid, apply_bond_rule, colours, membership, touching_pairs
 from .excavate import FacetSet, kept_sites
+from .limits import check_build
 from .machine import machine_info
 from .model import SphereModel
 from .packing import lattice_for
@@ -35,13 +36,18 @@ class Timer:
         return time.perf_counter() - self._t0
 
 
-def build_model(scene, progress=None, timer=None) -> SphereModel:
-    """Build the bonded sphere model of a validated scene."""
+def build_model(scene, progress=None, timer=None, max_spheres=None, estimate=None) -> SphereModel:
+    """Build the bonded sphere model of a validated scene.
+
+    The spheres and memory are estimated first (sgim/limits.py): past the scene's [limits] max_spheres (or
+    `max_spheres`, the --max-spheres value) or the memory available, SceneError before anything is allocated.
+    `estimate`: the Estimate of a check_build the caller has already made (the check is not repeated)."""
     tm = timer or Timer(progress)
+    est = estimate if estimate is not None else check_build(scene, max_spheres=max_spheres, progress=tm.progress)
     if scene.packing.kind == "random":  # random dense packing of the kept region (sgim/rpack.py)
         from .rpack import build_random
 
-        centres, radii, pack_meta, cavity_meta = build_random(scene, tm)
+        centres, radii, pack_meta, cavity_meta = build_random(scene, tm, region=est.region, near=est.near)
         n = len(centres)
     else:
         lat = lattice_for(scene)

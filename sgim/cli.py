@@ -42,7 +42,6 @@ def _progress(quiet):
 
 
 def cmd_build(args):
-    from .build import Timer, build_model, summary
     from .scene import OUTPUT_FORMATS, load_scene
 
     t0 = time.perf_counter()
@@ -57,9 +56,12 @@ def cmd_build(args):
         raise CliError(f"{out}: output exists and is not a folder")
     from .limits import check_build
 
-    # spheres and memory estimated before any progress line: a refused build prints its one line only
+    # spheres and memory estimated before any progress line (a refused build prints its one line only) and
+    # before the build's modules are imported (a refusal takes the interpreter's start and the scene's reading)
     t_parse = time.perf_counter() - t0
     est = check_build(scene, max_spheres=positive_int(args.max_spheres, "--max-spheres"))
+    from .build import Timer, build_model, summary
+
     timer = Timer(say)
     timer.t["parse"] = t_parse
     timer.t["estimate"] = time.perf_counter() - t0 - t_parse

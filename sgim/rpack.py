@@ -846,13 +846,16 @@ def pack_and_measure(region, spec, near=None, gap=1e-3, local_radius=None, progr
     return res, stats, volume
 
 
-def build_random(scene, tm):
-    """Pack a scene's kept region.  Returns (centres, radii, packing meta, cavity meta)."""
+def build_random(scene, tm, region=None, near=None):
+    """Pack a scene's kept region.  Returns (centres, radii, packing meta, cavity meta).  `region` / `near`:
+    the Region and NearObjects of the scene when already built (sgim/limits.py builds them for its estimate)."""
     from .cavities import carve
 
     spec = scene.packing.random
-    region = Region.from_scene(scene, fill=spec.fill)
-    near = NearObjects(scene, spec.grading) if spec.grading is not None else None
+    if region is None:
+        region = Region.from_scene(scene, fill=spec.fill)
+    if near is None and spec.grading is not None:
+        near = NearObjects(scene, spec.grading)
     local = None
     if near is not None:
         gr = spec.grading
