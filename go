@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Set-up-and-go for a fresh Debian machine (idempotent; fast when set-up is done).
-#   ./go run   [SCENE] [OUTDIR]   build the sphere model of SCENE (default: cases/open_pit.toml)
+#   ./go run   [SCENE] [OUTDIR]   build the sphere model of SCENE (default: cases/open_pit.toml); a run
+#                                 again replaces its earlier model there (sgim build --force: files added
+#                                 by hand stay, a folder of other files is refused)
 #   ./go test  [PYTEST ARGS]      run the test suite
 # The Python packages are the exact versions in requirements.lock; the project goes in on top of them.
 #   ./go lock                     re-resolve pyproject.toml's ranges in a throwaway venv, rewrite requirements.lock
@@ -113,7 +115,7 @@ case "$cmd" in
     setup
     scene="${1:-cases/open_pit.toml}"
     out="${2:-out/$(basename "${scene%.toml}")}"
-    exec .venv/bin/sgim build "$scene" -o "$out"
+    exec .venv/bin/sgim build "$scene" -o "$out" --force
     ;;
   test)
     setup

@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 
-from sgim.cli import CliError, _progress, positive_int, run_command
+from sgim.cli import FORCE_HELP, CliError, _progress, positive_int, run_command
 
 EXIT_ENGINE = 3
 
@@ -22,7 +22,7 @@ def cmd_export(args):
     say = _progress(args.quiet)
     overrides = {"duration": args.duration, "dt": args.dt, "record_every": args.record_every}
     info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say,
-                  max_steps=positive_int(args.max_steps, "--max-steps"))
+                  max_steps=positive_int(args.max_steps, "--max-steps"), force=args.force)
     if args.json:
         print(json.dumps(info, indent=2))
     return 0
@@ -61,7 +61,8 @@ def main(argv=None):
     p.add_argument("source", help="DDA scene (.toml with [spheres], or blocks for yade), sgim scene .toml, "
                                   "model.npz or run.npz")
     p.add_argument("--to", required=True, help="yade | liggghts | pfc-text | vtu")
-    p.add_argument("-o", "--output", required=True, help="deck folder (replaced when it exists)")
+    p.add_argument("-o", "--output", required=True, help="deck folder (new, empty, or an earlier export's "
+                                                         "with --force)")
     p.add_argument("--variant", help="liggghts: bonds (default) | sjkr | clumps")
     p.add_argument("--duration", type=float, help="run length [s] (overrides the scene)")
     p.add_argument("--dt", type=float, help="time step [s] (overrides the scene)")
@@ -70,6 +71,7 @@ def main(argv=None):
                                                     "the scene's [simulation] max_steps, default 1e8)")
     p.add_argument("--json", action="store_true", help="print deck.json")
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=cmd_export)
     p = sub.add_parser("run", help="run a deck folder with its engine")
     p.add_argument("deck")

@@ -115,13 +115,16 @@ def _apply_overrides(run, ov, path):
     run.record_every = min(run.record_every, run.duration)
 
 
-def export(source, to, out, variant=None, overrides=None, progress=None, max_steps=None):
+def export(source, to, out, variant=None, overrides=None, progress=None, max_steps=None, force=False):
     """Write the deck folder `out` for engine/format `to` from `source`; returns its deck.json dict.
+
+    `out` must be new, empty or hold an earlier `adapters export` deck, which `force` replaces (only the files
+    that export wrote; files added by hand stay): sgim/outdir.py. Anything else is refused before any work.
 
     A yade or liggghts deck whose steps (duration / dt) pass the step limit (`max_steps`, the --max-steps
     value, else the DDA scene's [simulation] max_steps, else 1e8; dda/limits.py) is refused before the folder
     is made."""
-    from sgim.cli import assembled_folder
+    from sgim.cli import output_folder
 
     if to not in TARGETS:
         raise DeckError(f"--to: unknown target {to!r} (choose from {', '.join(TARGETS)})")
@@ -131,6 +134,7 @@ def export(source, to, out, variant=None, overrides=None, progress=None, max_ste
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise DeckError(f"{out}: output exists and is not a folder")
+    dest = output_folder(out, "adapters export", force=force, say=progress)
     try:
         kind, run, model = load_source(source, overrides, max_steps=max_steps, limit_steps=to in RUNNABLE)
     except SpecError as exc:
@@ -151,7 +155,7 @@ def export(source, to, out, variant=None, overrides=None, progress=None, max_ste
         raise DeckError(f"{source}: the model has no spheres")
     if to == "pfc-text" and model is None:
         raise DeckError(f"{source}: pfc-text needs an sgim model or scene (a run.npz has no model)")
-    with assembled_folder(out) as tmp:
+    with dest.assemble() as tmp:
         info = {"engine": to, "variant": variant, "source": str(source)}
         if kind == "blocks":
             from .yade_poly import write_polyhedra_deck

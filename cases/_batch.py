@@ -28,6 +28,11 @@ case order (temporary file, fsync, atomic rename), so serial and MPI runs give t
 wall_s and rank columns).
 A lock (flock on OUTDIR/.lock) stops two runs writing one folder. OUTDIR/runs.jsonl gets one line per
 completed run (ranks, cases run, wall time).
+
+The output folder (sgim/outdir.py's rule): a new or empty folder, or one holding the same study (a restart);
+a folder with other files and no study is refused, as is one holding a different study unless --force, which
+removes that study's own files only (study_files: the tables, study.json, runs.jsonl, report.md, report/ and
+cases/ID/ of its cases; files added by hand stay). The marker .rockdem-output lists them.
 """
 from __future__ import annotations
 
@@ -550,7 +555,56 @@ def _request(study, outdir, case):
             "study_dir": str(study.path.parent.resolve())}
 
 
-def _prepare(study, outdir):
+STUDY_COMMAND = "cases study run"
+
+
+def study_files(case_ids):
+    """What a study writes in its output folder (a name ending in '/': a folder, all of it the study's)."""
+    return ["study.json", "results.csv", "results.jsonl", "runs.jsonl", "report.md", "report/",
+            *(f"cases/{cid}/" for cid in case_ids)]
+
+
+def _check_folder(outdir):
+    """Refuse (CliError) an existing output folder that holds neither this tool's study nor nothing."""
+    from sgim.outdir import MARKER, folder_entries, read_marker, shown_names
+
+    label = f"-o = {str(outdir)!r}"
+    if not outdir.exists():
+        return
+    if not outdir.is_dir():
+        raise CliError(f"{outdir}: {label}: output exists and is not a folder")
+    marker = read_marker(outdir)
+    if marker is None:
+        entries = [n for n in folder_entries(outdir) if n != ".lock"]
+        if entries and not (outdir / "study.json").is_file():  # with study.json: a study from before the marker
+            raise CliError(f"{label}: folder exists and holds files this tool did not write ({shown_names(entries)}); "
+                           "choose a new folder")
+    elif not marker:
+        raise CliError(f"{label}: {MARKER} in the folder is not an output marker of this tool; choose a new folder")
+    elif marker["command"] != STUDY_COMMAND:
+        raise CliError(f"{label}: folder holds an earlier output of {marker['command']}, not of a study; "
+                       "choose a new folder")
+
+
+def _remove_study(outdir, old):
+    """Remove the files of the study whose study.json is `old` (files added by hand stay)."""
+    ids = [c.get("case_id") for c in old.get("cases", []) if isinstance(c, dict)]
+    for name in study_files(i for i in ids if isinstance(i, str) and i and "/" not in i and i not in (".", "..")):
+        p = outdir / name.rstrip("/")
+        if p.is_symlink() or (p.is_file() and not name.endswith("/")):
+            p.unlink()
+        elif p.is_dir() and name.endswith("/"):
+            shutil.rmtree(p)
+    try:
+        (outdir / "cases").rmdir()
+    except OSError:
+        pass
+
+
+def _prepare(study, outdir, force=False):
+    from sgim.outdir import write_marker
+
+    _check_folder(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     lock = open(outdir / ".lock", "a+")
     try:
@@ -560,6 +614,7 @@ def _prepare(study, outdir):
         raise CliError(f"{outdir}: -o = {str(outdir)!r}: another study run is writing this folder") from None
     info = study.to_json()
     sj = outdir / "study.json"
+    same = False
     if sj.exists():
         from sgim.readback import read_json
 
@@ -569,20 +624,24 @@ def _prepare(study, outdir):
             lock.close()
             raise
         same = all(old.get(k) == json.loads(json.dumps(info[k])) for k in ("cases", "engine", "results"))
-        if not same:
+        if not same and not force:
             lock.close()
             raise CliError(f"{outdir}: -o = {str(outdir)!r}: holds a different study (its study.json differs in "
-                           "cases, engine or results): use a new output folder")
-    else:
+                           "cases, engine or results): use a new output folder, or --force to replace it")
+        if not same:
+            _remove_study(outdir, old)
+    write_marker(outdir, STUDY_COMMAND, study_files(c.case_id for c in study.cases) + [".lock"])
+    if not same:
         tmp = sj.with_name("study.json.tmp")
         tmp.write_text(json.dumps(info, indent=1))
         os.replace(tmp, sj)
     return lock
 
 
-def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_failed=False):
+def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_failed=False, force=False):
     """Run every case not yet in OUTDIR/results.csv. Serial when comm is None; otherwise call on every rank
-    (rank 0 hands out cases and writes the table, all ranks run cases). Returns a summary dict on rank 0."""
+    (rank 0 hands out cases and writes the table, all ranks run cases). Returns a summary dict on rank 0.
+    `force`: a folder holding a different study has that study's files removed first (see _prepare)."""
     outdir = Path(outdir).resolve()
     timeout = timeout if timeout is not None else study.timeout
     if comm is not None and comm.Get_rank() != 0:
@@ -593,7 +652,7 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
     local = CaseProcess(study.path.parent.resolve())
     local.start()  # its imports overlap with the set-up
     try:
-        lock = _prepare(study, outdir)
+        lock = _prepare(study, outdir, force=force)
         table = Table(outdir, [p.path for p in study.params], study.results)
         ids = {c.case_id for c in study.cases}
         for cid, no in table.line_of.items():

@@ -121,7 +121,7 @@ def run_engine(engine, source, work, timeout=None, run=None):
 
         return run_inhouse(run if run is not None else from_scene(source))
     deck = Path(work) / engine
-    export(source, engine, deck)
+    export(source, engine, deck, force=True)  # a deck of an earlier run (--keep): replaced, nothing else is
     return run_deck(deck, out=deck / "result", timeout=timeout)
 
 

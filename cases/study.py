@@ -612,7 +612,7 @@ def cmd_run(args):
         comm.Barrier()
         return EXIT_BAD_INPUT
     summary = run_study(study, Path(args.output), timeout=args.timeout, comm=comm, progress=say,
-                        retry_failed=args.retry_failed)
+                        retry_failed=args.retry_failed, force=args.force)
     if rank == 0 and not args.quiet:
         f = summary
         print(f"{f['outdir']}/results.csv: {f['done']}/{f['total']} cases ({f['ok']} ok, {f['failed']} failed, "
@@ -662,6 +662,8 @@ def make_parser():
     r.add_argument("-o", "--output", required=True, help="output folder (a restart skips finished cases)")
     r.add_argument("--timeout", type=float, default=None, help="per-case time limit [s] (overrides the study)")
     r.add_argument("--retry-failed", action="store_true", help="run failed and timed-out cases again")
+    r.add_argument("--force", action="store_true", help="replace a different study's output in the folder (its "
+                   "own files only; files added by hand stay); the same study is resumed with or without it")
     r.add_argument("--quiet", action="store_true")
     r.set_defaults(func=cmd_run)
     ls = sub.add_parser("list", help="the cases of a study (nothing is run)")

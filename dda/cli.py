@@ -1,7 +1,9 @@
 """Command line: ``dda run SCENE -o OUTDIR [--quiet]`` and ``dda wedge ...``.
 
 Bad input prints one line naming the file, key and value, exits with status 2 and leaves no output behind
-(the output folder is assembled under a temporary name and renamed into place at the end). A run that blows
+(the output is assembled in a temporary folder and moved into place at the end). The output folder is written
+only when it is new, empty or holds an earlier `dda run` output (replaced with --force; files added by hand
+stay): sgim/outdir.py. A run that blows
 up writes the folder with the last good state and a summary saying so, and exits with status 3.
 """
 from __future__ import annotations
@@ -14,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import CliError, _progress, assembled_folder, positive_int, run_command  # sgim's CLI conventions
+from sgim.cli import FORCE_HELP, CliError, _progress, output_folder, positive_int, run_command  # sgim's CLI conventions
 from sgim.machine import machine_info
 
 from .results import ENERGY_COLUMNS
@@ -22,7 +24,7 @@ from .results import ENERGY_COLUMNS
 EXIT_BLOWUP = 3
 
 
-def _write_outputs(scene, sim, res, tmp, frames, summary, say):
+def _write_outputs(scene, sim, res, tmp, frames, summary, say, out):
     from .render import render_png, write_pvd
     from .results import save_final
 
@@ -36,7 +38,7 @@ def _write_outputs(scene, sim, res, tmp, frames, summary, say):
     if "png" in scene.formats:
         render_png(sim, tmp / "final.png", scene.width, scene.height, title=scene.name)
         if say:
-            say(f"render     {tmp.name}/final.png")
+            say(f"render     {out / 'final.png'}")
     (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
 
 
@@ -112,7 +114,7 @@ def _sphere_meshes(sim, colour):
     return spheres, blocks
 
 
-def _run_spheres(scene, out, args, say, t0):
+def _run_spheres(scene, out, dest, args, say, t0):
     """`dda run` of a scene with [spheres]: series.npz (positions, energies, intact bonds per record, the final
     bond state; block_pos / block_quat per record when blocks move), series.csv, a VTU frame series
     (frames/spheres_*.vtu: points with radius, fixed, velocity, displacement, colour; frames/blocks_*.vtu, or one
@@ -127,7 +129,7 @@ def _run_spheres(scene, out, args, say, t0):
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
             f"{ss.n_joints} smooth joints, {len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s)")
-    with assembled_folder(out) as tmp:
+    with dest.assemble() as tmp:
         want_vtu = "vtu" in scene.formats
         entries = []
         if want_vtu:
@@ -166,7 +168,7 @@ def _run_spheres(scene, out, args, say, t0):
             render_meshes(tmp / "final.png", blocks=blocks, spheres=spheres, width=scene.width,
                           height=scene.height, title=scene.name)
             if say:
-                say(f"render     {tmp.name}/final.png")
+                say(f"render     {out / 'final.png'}")
         e = res.energy[-1]
         summary = {
             "scene": scene.name, "scene_path": str(scene.path), "status": status, "message": message,
@@ -197,13 +199,14 @@ def cmd_run(args):
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: -o = {str(out)!r}: output exists and is not a folder")
+    dest = output_folder(out, "dda run", force=args.force, say=say)  # refused before the run
     if scene.spheres:
-        return _run_spheres(scene, out, args, say, t0)
+        return _run_spheres(scene, out, dest, args, say, t0)
     bs, sim = scene.build(max_steps=positive_int(args.max_steps, "--max-steps"))  # step limit: SceneError
     if say:
         say(f"scene      {scene.name}: {bs.n_blocks} blocks ({len(sim.active)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s), {int(round(scene.duration / sim.dt))} steps")
-    with assembled_folder(out) as tmp:
+    with dest.assemble() as tmp:
         frames = []
         want_vtu = "vtu" in scene.formats
         if want_vtu:
@@ -225,7 +228,7 @@ def cmd_run(args):
             "contacts_final": int(sim.stats[5]), "points_final": int(sim.stats[6]),
             "machine": machine_info(),
         }
-        _write_outputs(scene, sim, res, tmp, frames, summary, say)
+        _write_outputs(scene, sim, res, tmp, frames, summary, say, out)
     if status != "ok":
         print(f"dda: error: {message} (last good state written to {out})", file=sys.stderr)
         return EXIT_BLOWUP
@@ -242,6 +245,7 @@ def make_parser():
     r.add_argument("scene")
     r.add_argument("-o", "--output", required=True, help="output folder")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
+    r.add_argument("--force", action="store_true", help=FORCE_HELP)
     r.add_argument("--max-steps", metavar="N", help="refuse a run of more than N steps (duration / dt; overrides "
                                                     "the scene's [simulation] max_steps, default 1e8)")
     r.set_defaults(func=cmd_run)

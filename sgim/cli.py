@@ -1,25 +1,23 @@
 """Command line: ``sgim build | show | info | dfn``.
 
 Bad input prints one line naming the file, key and value, exits with status 2 and
-leaves no output behind (the output folder is assembled under a temporary name and
-renamed into place only when everything is written).
+leaves no output behind (the output is assembled in a temporary folder and moved into place
+only when everything is written). An output folder is written only when it is new, empty or
+holds the command's own earlier output (replaced with --force; files the user added stay):
+sgim/outdir.py.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
-import shutil
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
+from sgim.errors import CliError  # one class also under `python -m sgim.cli` (sgim/errors.py)
+
 EXIT_BAD_INPUT = 2
-
-
-class CliError(Exception):
-    """One-line error for the user (exit status 2)."""
 
 
 def reader_gone():
@@ -54,6 +52,7 @@ def cmd_build(args):
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: output exists and is not a folder")
+    dest = output_folder(out, "sgim build", force=args.force, say=say)  # refused before any work
     from .limits import check_build
 
     # spheres and memory estimated before any progress line (a refused build prints its one line only) and
@@ -69,7 +68,7 @@ def cmd_build(args):
         say(f"parse      {timer.t['parse']:7.2f} s  {args.scene}")
         say(f"{est.line()} ({timer.t['estimate']:.2f} s)")
     model = build_model(scene, timer=timer, estimate=est)
-    with assembled_folder(out) as tmp:
+    with dest.assemble() as tmp:
         model.save(tmp / "model.npz")
         timer.lap("write npz", str(out / "model.npz"))
         if "vtu" in formats:
@@ -116,8 +115,9 @@ def cmd_dfn(args):
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: output exists and is not a folder")
+    dest = output_folder(out, "sgim dfn", force=args.force, say=say)
     net = network_for(scene, progress=say)
-    with assembled_folder(out) as tmp:
+    with dest.assemble() as tmp:
         write_network(net, tmp)
         info = {"scene": scene.name, "scene_path": str(scene.path), **net.summary(),
                 "seconds": round(time.perf_counter() - t0, 4)}
@@ -144,31 +144,17 @@ def positive_int(text, flag):
     return int(v)
 
 
-@contextmanager
-def assembled_folder(out):
-    """A command's output folder, assembled under a temporary name beside ``out`` (``.NAME.partPID``): on
-    success it replaces ``out`` (replace_folder); on any error it is removed, so a failed command leaves no
-    output behind."""
-    tmp = out.with_name(f".{out.name}.part{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
-        yield tmp
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    replace_folder(tmp, out)
+def output_folder(out, command, force=False, say=None):
+    """The checked output folder of a command (sgim/outdir.py): a CliError (one line, nothing touched) when
+    `out` holds files the command did not write, or its earlier output without `force`; its ``assemble()``
+    yields the temporary folder to write into."""
+    from .outdir import OutputFolder
+
+    return OutputFolder(out, command, force=force, say=say)
 
 
-def replace_folder(tmp, out):
-    """Rename the finished folder ``tmp`` to ``out``, replacing an existing ``out``."""
-    if out.exists():
-        old = out.with_name(f".{out.name}.old{os.getpid()}")
-        os.replace(out, old)
-        os.replace(tmp, out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(tmp, out)
+FORCE_HELP = ("replace the command's earlier output in the folder (only the files it wrote there; files "
+              "added by hand stay)")
 
 
 def _load_model(path):
@@ -258,6 +244,7 @@ def make_parser():
     b.add_argument("--quiet", action="store_true", help="no progress lines")
     b.add_argument("--json", action="store_true", help="print a JSON summary (counts, bonds, timings)")
     b.add_argument("--formats", help="comma list of npz,vtu,txt,png (default: the scene's [output] formats)")
+    b.add_argument("--force", action="store_true", help=FORCE_HELP)
     b.add_argument("--max-spheres", metavar="N", help="refuse a build estimated past N spheres (overrides the "
                                                       "scene's [limits] max_spheres; default: see sgim/limits.py)")
     b.set_defaults(func=cmd_build)
@@ -281,6 +268,7 @@ def make_parser():
     f.add_argument("-o", "--output", required=True, help="output folder (network.csv, .json, .vtu, summary.json)")
     f.add_argument("--quiet", action="store_true", help="no progress lines")
     f.add_argument("--json", action="store_true", help="print the JSON summary (per-set statistics)")
+    f.add_argument("--force", action="store_true", help=FORCE_HELP)
     f.set_defaults(func=cmd_dfn)
     return p
 

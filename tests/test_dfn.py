@@ -544,7 +544,7 @@ def test_cli_dfn_and_build(tmp_path):
     assert p.returncode == 0, p.stderr
     info = json.loads(p.stdout)
     files = sorted(x.name for x in (tmp_path / "net").iterdir())
-    assert files == ["network.csv", "network.json", "network.vtu", "summary.json"]
+    assert files == [".rockdem-output", "network.csv", "network.json", "network.vtu", "summary.json"]
     doc = json.loads((tmp_path / "net" / "network.json").read_text())
     assert len(doc["fractures"]) == info["fractures"] > 10
     csv_rows = (tmp_path / "net" / "network.csv").read_text().splitlines()
@@ -562,7 +562,7 @@ def test_cli_dfn_and_build(tmp_path):
     summ = json.loads((tmp_path / "model" / "summary.json").read_text())
     assert summ["meta"]["dfn"]["fractures"] == info["fractures"]
     assert summ["discontinuities"] == info["fractures"]
-    t = run("dfn", "s.toml", "-o", "net", cwd=tmp_path)  # replaces the folder, prints the table
+    t = run("dfn", "s.toml", "-o", "net", "--force", cwd=tmp_path)  # replaces its output, prints the table
     assert t.returncode == 0 and "J1" in t.stdout and "P32" in t.stdout
 
 

@@ -228,8 +228,8 @@ def test_max_spheres_flag_just_below_refuses_and_at_or_above_builds(tmp_path, ca
     rc = sgim_main(["build", str(scene), "-o", str(out), "--max-spheres", str(n - 1)])
     line = _refused(capsys, rc, out, f"--max-spheres = {n - 1}", "packing.radius")
     assert f"holds {n} sites" in line
-    for limit in (n, n + 1):
-        assert sgim_main(["build", str(scene), "-o", str(out), "--quiet", "--max-spheres", str(limit)]) == 0
+    for limit in (n, n + 1):  # the second replaces the first's output (--force)
+        assert sgim_main(["build", str(scene), "-o", str(out), "--quiet", "--force", "--max-spheres", str(limit)]) == 0
         assert _spheres_in(out / "model.npz") == n
 
 

@@ -299,9 +299,9 @@ def test_build_png_written(built):
 
 def test_rebuild_replaces_output(tmp_path):
     (tmp_path / "scene.toml").write_text(GOOD)
-    for _ in range(2):
-        res = sgim("build", "scene.toml", "-o", "out", "--formats", "npz", "--quiet", cwd=tmp_path)
+    for force in ([], ["--force"]):  # the second build replaces the first's output (sgim/outdir.py)
+        res = sgim("build", "scene.toml", "-o", "out", "--formats", "npz", "--quiet", *force, cwd=tmp_path)
         assert res.returncode == 0, res.stderr
     assert sorted(os.listdir(tmp_path)) == ["out", "scene.toml"]
-    assert sorted(os.listdir(tmp_path / "out")) == ["model.npz", "summary.json"]
+    assert sorted(os.listdir(tmp_path / "out")) == [".rockdem-output", "model.npz", "summary.json"]
     shutil.rmtree(tmp_path / "out")

@@ -66,8 +66,8 @@ def faulty(scene_path, case_dir, params):
             os.kill(os.getpid(), signal.SIGKILL)
     if mode == "kill_always":
         os.kill(os.getpid(), signal.SIGKILL)
-    if os.environ.get("ROCKDEM_STUDY_RANK") == "1" and (out / "kill_rank_1").exists():
-        (out / "kill_rank_1").unlink()
+    if os.environ.get("ROCKDEM_STUDY_RANK") == "1" and (out.parent / "kill_rank_1").exists():
+        (out.parent / "kill_rank_1").unlink()
         os.kill(int(os.environ["ROCKDEM_STUDY_PARENT"]), signal.SIGKILL)
     time.sleep(float(params.get("contact.damping", 0.0)))
     x = float(params["contact.friction"])
@@ -433,11 +433,12 @@ def test_rank_killed_mid_study_then_restart(tmp_path):
     path = write_study(tmp_path, RESTART_STUDY)
     study = load_study(path)
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "kill_rank_1").write_text("x")  # the first case on rank 1 kills rank 1
+    # beside the output folder (a study writes only into a new, empty or its own folder): the first case on
+    # rank 1 kills rank 1
+    (tmp_path / "kill_rank_1").write_text("x")
     r = run_mpi(2, "run", path, "-o", out, "--quiet")
     assert r.returncode != 0
-    assert not (out / "kill_rank_1").exists()
+    assert not (tmp_path / "kill_rank_1").exists()
     first = {row["case_id"]: row for row in read_table(out)}
     assert len(first) < len(study.cases)
     _wait_unlocked(out)
