@@ -1,4 +1,12 @@
-"""Numba kernels: sphere grid, discontinuity membership, colours, bonds and bond rules."""
+"""Numba kernels: sphere grid, discontinuity membership, colours, bonds and bond rules.
+
+Ties (the paper's eq. 13-16 and the bond rules are closed inequalities, and a joint at a round coordinate
+through a lattice puts centres exactly on its plane, at exactly 2r from it or at exactly R from its axis):
+every comparison allows the excavation's tie allowance, ROUND (sgim/_excavate.py) times the magnitudes of the
+coordinates, |O|_1 + |M|_1 (a length), so that a centre within it of the joint plane lies on the plane (offset
+0, green, as S.(M - O) >= 0 says) and one within it of the 2r band, the d/2 slab or the radius R is inside,
+the same on both sides of the plane, whatever the rounding of the lattice coordinates.
+"""
 from __future__ import annotations
 
 import math
@@ -6,9 +14,20 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ._excavate import ROUND
+
 KIND_INSIDE = 1  # inside a thick discontinuity (red)
-KIND_GREEN = 2  # within 2r of a joint, S.(M - O) >= 0
+KIND_GREEN = 2  # within 2r of a joint, S.(M - O) >= 0 (the plane included)
 KIND_BLUE = 3  # within 2r of a joint, S.(M - O) < 0
+
+
+@njit(cache=True, inline="always")
+def tie_allowance(x0, y0, z0, x1, y1, z1):
+    """The length within which a closed inequality of eq. 13-16 holds as a tie: ROUND (|O|_1 + |M|_1).
+
+    The rounding of the coordinates (a lattice site, a disc centre typed in decimal) and of the products is a
+    few ulps of these magnitudes; ROUND is thousands of ulps and far below any lattice spacing."""
+    return ROUND * (abs(x0) + abs(y0) + abs(z0) + abs(x1) + abs(y1) + abs(z1))
 
 
 # ---------------------------------------------------------------------------
@@ -72,9 +91,7 @@ def _slab_cells(M, S, band, g0, cs, dims, a, b, e, ib, ie, lo_a, hi_a):
     The cell boxes are padded by a small margin so that a centre sorted into a cell by rounding is
     never missed; the spheres found are tested exactly afterwards."""
     ns = math.sqrt(S[0] * S[0] + S[1] * S[1] + S[2] * S[2])
-    scale = (abs(g0[0]) + abs(g0[1]) + abs(g0[2]) + abs(M[0]) + abs(M[1]) + abs(M[2])
-             + (dims[0] + dims[1] + dims[2]) * cs)
-    eps = 1e-6 * cs + 1e-12 * scale
+    eps = _grid_pad(M, g0, cs, dims)  # >= the tie allowance of every centre in the grid
     tb0 = S[b] * (g0[b] + ib * cs - eps - M[b])
     tb1 = S[b] * (g0[b] + (ib + 1) * cs + eps - M[b])
     te0 = S[e] * (g0[e] + ie * cs - eps - M[e])
@@ -96,30 +113,44 @@ def _slab_cells(M, S, band, g0, cs, dims, a, b, e, ib, ie, lo_a, hi_a):
 
 @njit(cache=True)
 def _disc_test(c, rad, i, M, S, R, d):
-    """Membership kind of sphere i for disc (M, S, R, d) or 0; and signed offset S.(O-M)/|S|."""
+    """Membership kind of sphere i for disc (M, S, R, d) or 0; and signed offset S.(O-M)/|S| (0 on the plane).
+
+    Eq. 13-16 with the tie allowance of the module docstring."""
     A, B, C = S[0], S[1], S[2]
     ns = math.sqrt(A * A + B * B + C * C)
+    tie = tie_allowance(c[i, 0], c[i, 1], c[i, 2], M[0], M[1], M[2])
     mx, my, mz = c[i, 0] - M[0], c[i, 1] - M[1], c[i, 2] - M[2]  # vector MO
     cx = my * C - mz * B
     cy = mz * A - mx * C
     cz = mx * B - my * A
-    off = -(A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])) / ns
-    if math.sqrt(cx * cx + cy * cy + cz * cz) / ns > R:  # eq. 13
+    dot = A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])  # S.(M - O)
+    off = -dot / ns
+    if abs(off) <= tie:  # on the plane
+        off = 0.0
+    if math.sqrt(cx * cx + cy * cy + cz * cz) / ns > R + tie:  # eq. 13
         return 0, off
-    dot = A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])
     if d != 0.0:
-        if abs(dot) / ns <= d / 2.0:  # eq. 14
+        if abs(off) <= d / 2.0 + tie:  # eq. 14
             return KIND_INSIDE, off
         return 0, off
-    if abs(dot) / ns <= 2.0 * rad[i]:  # eq. 15 / 16
-        return (KIND_GREEN if dot >= 0.0 else KIND_BLUE), off
+    if abs(off) <= 2.0 * rad[i] + tie:  # eq. 15 / 16: green where S.(M - O) >= 0, i.e. off <= 0
+        return (KIND_GREEN if off <= 0.0 else KIND_BLUE), off
     return 0, off
+
+
+@njit(cache=True)
+def _grid_pad(M, g0, cs, dims):
+    """Margin that keeps a centre sorted into a cell by rounding (or lying within the tie allowance) in
+    the cell ranges a disc visits; the spheres found are tested exactly afterwards."""
+    scale = (abs(g0[0]) + abs(g0[1]) + abs(g0[2]) + abs(M[0]) + abs(M[1]) + abs(M[2])
+             + (dims[0] + dims[1] + dims[2]) * cs)
+    return 1e-6 * cs + 1e-12 * scale
 
 
 @njit(cache=True)
 def _disc_pass(c, rad, start, order, g0, cs, dims, M, S, R, d, rmax, out_s, out_k, out_o, pos):
     band = d / 2.0 if d != 0.0 else 2.0 * rmax
-    ext = R + band
+    ext = R + band + _grid_pad(M, g0, cs, dims)
     lo3, hi3 = _box_cells(M, ext, g0, cs, dims)
     a = _dominant_axis(S)
     b, e = max((a + 1) % 3, (a + 2) % 3), min((a + 1) % 3, (a + 2) % 3)  # inner loop on the smaller stride
@@ -275,11 +306,24 @@ def green_blue_cutter(bonds, cut, colour, source, mstart, mdisc, mkind, moff):
     return by
 
 
+@njit(cache=True, inline="always")
+def _side_dot(c, i, M, A, B, C, ns):
+    """S.(M - O) of centre i, 0 when O lies on the plane within the tie allowance."""
+    s = A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])
+    if abs(s) / ns <= tie_allowance(c[i, 0], c[i, 1], c[i, 2], M[0], M[1], M[2]):
+        return 0.0
+    return s
+
+
 @njit(cache=True)
 def geometric_cuts(c, rad, start, order, g0, cs, dims, bond_start, bonds, colour, source,
                    centres, normals, radii, thick, lmax):
     """Geometric rule: cut a bond when a red sphere ends it (by that fault) or when the
-    segment between centres crosses a zero-thickness disc inside its radius (lowest disc id)."""
+    segment between centres crosses a zero-thickness disc inside its radius (lowest disc id).
+
+    The ends' sides are those of eq. 15 / 16 with the tie allowance (a centre on the plane is on the green
+    side: a bond from it is cut when the other end is blue); the crossing point is inside the radius with the
+    tie allowance too."""
     m = bonds.shape[0]
     by = np.full(m, -1, np.int32)
     for b in range(m):
@@ -294,7 +338,7 @@ def geometric_cuts(c, rad, start, order, g0, cs, dims, bond_start, bonds, colour
         M, S, R = centres[k], normals[k], radii[k]
         A, B, C = S[0], S[1], S[2]
         ns = math.sqrt(A * A + B * B + C * C)
-        ext = R + lmax
+        ext = R + lmax + _grid_pad(M, g0, cs, dims)
         lo3, hi3 = _box_cells(M, ext, g0, cs, dims)
         a = _dominant_axis(S)
         ab, ae = max((a + 1) % 3, (a + 2) % 3), min((a + 1) % 3, (a + 2) % 3)
@@ -309,23 +353,25 @@ def geometric_cuts(c, rad, start, order, g0, cs, dims, bond_start, bonds, colour
                     cell = (idx[2] * dims[1] + idx[1]) * dims[0] + idx[0]
                     for q in range(start[cell], start[cell + 1]):
                         i = order[q]
-                        si = A * (M[0] - c[i, 0]) + B * (M[1] - c[i, 1]) + C * (M[2] - c[i, 2])
+                        si = _side_dot(c, i, M, A, B, C, ns)
                         if abs(si) / ns > lmax:
                             continue
                         for b in range(bond_start[i], bond_start[i + 1]):
                             if by[b] >= 0:
                                 continue
                             j = bonds[b, 1]
-                            sj = A * (M[0] - c[j, 0]) + B * (M[1] - c[j, 1]) + C * (M[2] - c[j, 2])
-                            if (si >= 0.0) == (sj >= 0.0):
+                            sj = _side_dot(c, j, M, A, B, C, ns)
+                            if (si >= 0.0) == (sj >= 0.0):  # same side (green: S.(M - O) >= 0)
                                 continue
-                            t = si / (si - sj)
-                            px = c[i, 0] + t * (c[j, 0] - c[i, 0]) - M[0]
-                            py = c[i, 1] + t * (c[j, 1] - c[i, 1]) - M[1]
-                            pz = c[i, 2] + t * (c[j, 2] - c[i, 2]) - M[2]
+                            t = si / (si - sj)  # in [0, 1]: one end >= 0, the other < 0
+                            x = c[i, 0] + t * (c[j, 0] - c[i, 0])
+                            y = c[i, 1] + t * (c[j, 1] - c[i, 1])
+                            z = c[i, 2] + t * (c[j, 2] - c[i, 2])
+                            px, py, pz = x - M[0], y - M[1], z - M[2]
                             qx = py * C - pz * B
                             qy = pz * A - px * C
                             qz = px * B - py * A
-                            if math.sqrt(qx * qx + qy * qy + qz * qz) / ns <= R:
+                            if math.sqrt(qx * qx + qy * qy + qz * qz) / ns <= R + tie_allowance(x, y, z, M[0], M[1],
+                                                                                                 M[2]):
                                 by[b] = k
     return by

@@ -61,7 +61,7 @@ class Membership:
     sphere: np.ndarray  # (k,) int64
     disc: np.ndarray  # (k,) int32
     kind: np.ndarray  # (k,) int8: 1 inside (red), 2 green side, 3 blue side
-    offset: np.ndarray  # (k,) float64 signed distance S.(O - M)
+    offset: np.ndarray  # (k,) float64 signed distance S.(O - M), 0 on the plane (sgim/_cut.py: ties)
 
     def csr(self, n):
         """Rows regrouped by sphere: (start (n+1,), permutation)."""

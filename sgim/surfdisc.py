@@ -12,6 +12,11 @@ unchanged:
 - joint: within 2r, green where offset <= 0 (S.(M - O) >= 0), blue otherwise (eq. 15-16);
 - geometric bond rule: a pair is cut when the segment between the centres crosses the
   surface (discs first: the lowest discontinuity index cuts).
+
+Ties take the discs' tie allowance (sgim/_cut.py), with the largest |V|_1 of the surface's vertices for
+|M|_1: a centre within it of the surface lies on it (offset 0, green), one within it of the 2r band or the
+t/2 slab is inside, one whose closest point lies within it of the surface's boundary has its foot on the
+boundary (not a member), and a bond with one end on the surface is cut when the other end is blue.
 """
 from __future__ import annotations
 
@@ -35,16 +40,27 @@ def near_spheres(mesh, centres, grid, band):
 def surface_members(mesh, thickness, centres, radii, grid):
     """(sphere, kind, offset) of the members of one surface discontinuity, by sphere."""
     band = thickness / 2.0 if thickness > 0 else 2.0 * float(radii.max())
-    cand = near_spheres(mesh, centres, grid, band)
-    sd, face, bnd = mesh.signed_closest(centres[cand], max_dist=band)
+    vscale = _vertex_scale(mesh)
+    pad = _cut.ROUND * (float(np.abs(centres).sum(1).max()) + vscale) if len(centres) else 0.0
+    cand = near_spheres(mesh, centres, grid, band + 2.0 * pad)
+    pts = np.ascontiguousarray(centres[cand])
+    sd, face, bnd = mesh.signed_closest(pts, max_dist=band + 2.0 * pad)
+    tie = _cut.ROUND * (np.abs(pts).sum(1) + vscale)  # the tie allowance (sgim/_cut.py)
+    K.boundary_ties(mesh.kernel_data(), pts, face, tie, bnd)
+    sd = np.where(np.abs(sd) <= tie, 0.0, sd)  # on the surface
     lim = thickness / 2.0 if thickness > 0 else 2.0 * radii[cand]
-    ok = np.isfinite(sd) & ~bnd & (np.abs(sd) <= lim)
+    ok = np.isfinite(sd) & ~bnd & (np.abs(sd) <= lim + tie)
     s, off = cand[ok], sd[ok]
     if thickness > 0:
         kind = np.full(len(s), _cut.KIND_INSIDE, np.int8)
     else:
         kind = np.where(off <= 0.0, _cut.KIND_GREEN, _cut.KIND_BLUE).astype(np.int8)
     return s, kind, off
+
+
+def _vertex_scale(mesh):
+    """The largest |x| + |y| + |z| of the surface's vertices (the |M|_1 of its tie allowance)."""
+    return float(np.abs(mesh.vertices).sum(1).max()) if len(mesh.vertices) else 0.0
 
 
 def membership_with_surfaces(mem: Membership, surfaces, first_index, centres, radii, grid) -> Membership:
@@ -72,7 +88,7 @@ def surface_geometric_cuts(cut_by, surfaces, first_index, centres, radii, grid, 
             continue  # faults cut through their red spheres
         cand = near_spheres(surf.mesh, c, grid, lmax)
         K.crossing_cuts(surf.mesh.kernel_data(), cand, c, bond_start, bonds, cut_by, np.int32(first_index + j),
-                        CROSS_EPS)
+                        CROSS_EPS, _vertex_scale(surf.mesh), lmax)
     return cut_by
 
 

@@ -35,6 +35,15 @@ distance exactly r is kept as the strict inequality says:
       exact:  dist^2 < r^2 - ROUND (|x| + |y| + |z| + |ax| + |ay| + |az|)^2   (a: first vertex)  With random float input the
 allowance changes nothing but a set of measure ~1e-12; it only matters for sites placed
 exactly on facet edges, which the regression tests build on purpose.
+
+The colours (eq. 13-16) and the geometric rule's sides and radius take the same kind of allowance,
+tie = ROUND (|x0| + |y0| + |z0| + |x1| + |y1| + |z1|) (sphere centre O and disc centre M, a length;
+sgim/_cut.py), so that ties in a lattice are decided as the closed inequalities say:
+      eq. 13:      |MO x S| / |S| <= R + tie
+      eq. 14:      |S.(M - O)| / |S| <= d / 2 + tie
+      eq. 15 / 16: |S.(M - O)| / |S| <= 2r + tie, green where S.(M - O) / |S| >= -tie (the plane included:
+                   its offset is then 0), blue otherwise
+(tests/test_colour_ties.py checks the same ties against exact rational arithmetic instead.)
 """
 from __future__ import annotations
 
@@ -240,16 +249,19 @@ def disc_membership(centres, radii, M, S, R, d):
     cx = my * C - mz * B
     cy = mz * A - mx * C
     cz = mx * B - my * A
-    in_cyl = np.sqrt(cx * cx + cy * cy + cz * cz) / ns <= R  # eq. 13
+    tie = ROUND * (np.abs(x0) + np.abs(y0) + np.abs(z0) + abs(x1) + abs(y1) + abs(z1))
+    in_cyl = np.sqrt(cx * cx + cy * cy + cz * cz) / ns <= R + tie  # eq. 13
     dot = A * (x1 - x0) + B * (y1 - y0) + C * (z1 - z0)  # S.(M - O)
+    dist = np.abs(dot) / ns
+    on_plane = dist <= tie
     kind = np.zeros(len(centres), np.int8)
     if d != 0:
-        kind[in_cyl & (np.abs(dot) / ns <= d / 2.0)] = 1  # eq. 14
+        kind[in_cyl & (dist <= d / 2.0 + tie)] = 1  # eq. 14
     else:
-        near = in_cyl & (np.abs(dot) / ns <= 2.0 * np.asarray(radii))
-        kind[near & (dot >= 0.0)] = 2  # eq. 15
-        kind[near & (dot < 0.0)] = 3  # eq. 16
-    return kind, -dot / ns
+        near = in_cyl & (dist <= 2.0 * np.asarray(radii) + tie)
+        kind[near & ((dot >= 0.0) | on_plane)] = 2  # eq. 15
+        kind[near & (dot < 0.0) & ~on_plane] = 3  # eq. 16
+    return kind, np.where(on_plane, 0.0, -dot / ns)
 
 
 def membership_table(centres, radii, discs):
@@ -316,15 +328,21 @@ def segment_crosses_disc(a, b, M, S, R):
     """
     S = np.asarray(S, float)
     M = np.asarray(M, float)
-    sa = (M - a) @ S
-    sb = (M - b) @ S
+    ns = math.sqrt(float(S @ S))
+    mscale = float(np.abs(M).sum())
+
+    def side(o):  # S.(M - O), 0 on the plane (within the tie allowance)
+        s = (M - o) @ S
+        return np.where(np.abs(s) / ns <= ROUND * (np.abs(o).sum(1) + mscale), 0.0, s)
+
+    sa, sb = side(a), side(b)
     cross = (sa >= 0) != (sb >= 0)
     with np.errstate(invalid="ignore", divide="ignore"):  # t is unused where the ends are on one side
         t = sa / (sa - sb)
         p = a + t[:, None] * (b - a)
         q = p - M
         inplane = q - np.outer(q @ S, S) / float(S @ S)
-        return cross & (np.sqrt((inplane ** 2).sum(1)) <= R)
+        return cross & (np.sqrt((inplane ** 2).sum(1)) <= R + ROUND * (np.abs(p).sum(1) + mscale))
 
 
 def geometric_rule_bonded(centres, bonds, colour, discs):
