@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from sgim.portable import cholesky, eigvalsh, inv, matmul
+
 from .polyhedra import mass_properties
 
 
@@ -65,10 +67,10 @@ def mass_matrix(vertices, faces, density):
     vol, _, S = second_moments(vertices, faces)
     T0 = t_matrix((0.0, 0.0, 0.0))
     Tk = [t_matrix(e) - T0 for e in np.eye(3)]  # T(x) = T0 + sum_k x_k Tk
-    M = vol * T0.T @ T0
+    M = vol * matmul(T0.T, T0)
     for k in range(3):
         for l in range(3):
-            M += S[k, l] * Tk[k].T @ Tk[l]
+            M += S[k, l] * matmul(Tk[k].T, Tk[l])
     return density * M
 
 
@@ -85,7 +87,7 @@ def block_matrices(vloc, faces, density, E, nu):
     M = mass_matrix(vloc, faces, density)
     vol = second_moments(vloc, faces)[0]
     M9 = np.ascontiguousarray(M[3:, 3:])
-    return M9, np.linalg.inv(M9), vol * elastic_matrix(E, nu)
+    return M9, inv(M9), vol * elastic_matrix(E, nu)
 
 
 def critical_omega2(vloc, faces, density, E, nu, k_contact):
@@ -96,10 +98,9 @@ def critical_omega2(vloc, faces, density, E, nu, k_contact):
     r = np.asarray(vloc, float) - c
     v = r[int(np.argmax(np.einsum("ij,ij->i", r, r)))]
     T = t_matrix(v)
-    K = K + k_contact * T.T @ T
-    L = np.linalg.cholesky(M)
-    Li = np.linalg.inv(L)
-    return float(np.linalg.eigvalsh(Li @ K @ Li.T).max())
+    K = K + k_contact * matmul(T.T, T)
+    Li = inv(cholesky(M))
+    return float(eigvalsh(matmul(matmul(Li, K), Li.T)).max())
 
 
 @njit(cache=True)

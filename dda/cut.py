@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sgim.geometry import dip_to_normal
+from sgim.portable import matmul, norm
 
 from .blockspec import BlockSpec
 from .shapes import GeometryError, box, convex_hull, prism_from_polygon, volume
@@ -57,11 +58,11 @@ class JointSet:
 def _plane(p):
     n, q = p
     n = np.asarray(n, float).reshape(3)
-    nn = np.linalg.norm(n)
+    nn = norm(n)
     if not nn > 0 or not np.all(np.isfinite(n)):
         raise GeometryError(f"plane normal must be a finite non-zero vector (got {n.tolist()})")
     q = np.asarray(q, float)
-    d = float(n @ q) if q.ndim == 1 and q.size == 3 else float(q)
+    d = matmul(n, q) if q.ndim == 1 and q.size == 3 else float(q)
     return n / nn, d / nn
 
 
@@ -70,13 +71,13 @@ def joint_planes(js: JointSet, domain: BlockSpec) -> list:
     if not (np.isfinite(js.spacing) and js.spacing > 0):
         raise GeometryError(f"joint set spacing must be > 0 (got {js.spacing})")
     n = js.normal()
-    d0 = float(n @ np.asarray(js.origin, float))
-    s = domain.vertices @ n
+    d0 = matmul(n, np.asarray(js.origin, float))
+    s = matmul(domain.vertices, n)
     lo, hi = s.min(), s.max()
     if js.extent is not None:
         blo, bhi = (np.asarray(b, float) for b in js.extent)
         corners = np.array([[x, y, z] for x in (blo[0], bhi[0]) for y in (blo[1], bhi[1]) for z in (blo[2], bhi[2])])
-        e = corners @ n
+        e = matmul(corners, n)
         lo, hi = max(lo, e.min()), min(hi, e.max())
     k0 = int(np.ceil((lo - d0) / js.spacing))
     k1 = int(np.floor((hi - d0) / js.spacing))
@@ -94,7 +95,7 @@ def _edges(spec):
 def _section(spec, n, d, eps):
     """Signed distances (snapped to 0 within eps) and the points of the section polygon."""
     v = spec.vertices
-    s = v @ n - d
+    s = matmul(v, n) - d
     s[np.abs(s) <= eps] = 0.0
     e = _edges(spec)
     sa, sb = s[e[:, 0]], s[e[:, 1]]
@@ -113,7 +114,7 @@ def split(spec: BlockSpec, plane, tol: float = 1e-9, **fields):
     """
     n, d = _plane(plane)
     v = spec.vertices
-    eps = tol * float(np.linalg.norm(np.ptp(v, axis=0)))
+    eps = tol * norm(np.ptp(v, axis=0))
     s, sec = _section(spec, n, d, eps)
     if not (s < 0).any():
         return None, spec
@@ -164,12 +165,12 @@ def cut_convex(spec: BlockSpec, planes, tol: float = 1e-9, min_volume: float | N
     for k, ((n, d), ext) in enumerate(zip(planes, extents)):
         nxt = []
         for piece in pieces:
-            s = piece.vertices @ n - d
+            s = matmul(piece.vertices, n) - d
             if s.min() >= 0 or s.max() <= 0:
                 nxt.append(piece)
                 continue
             if ext is not None:
-                eps = tol * float(np.linalg.norm(np.ptp(piece.vertices, axis=0)))
+                eps = tol * norm(np.ptp(piece.vertices, axis=0))
                 _, sec = _section(piece, n, d, eps)
                 box_eps = max(eps, tol * float(np.ptp(np.asarray(ext, float), axis=0).max()))
                 if len(sec) == 0 or not _in_box(sec, ext, box_eps):

@@ -43,6 +43,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from sgim.geometry import dip_to_normal
+from sgim.portable import det3, matmul, norm, sin_cos_deg
 
 # The explicit 3D-DDA paper's wedge (digest): joint orientations, face dip, height, unit weight, friction.
 # Face dip direction 065: the trend of the line of intersection of the two joints (65.3 deg), rounded, so
@@ -94,10 +95,18 @@ def _angle(u, v):
 
 
 def _meet(n1, d1, n2, d2, n3, d3):
-    m = np.array([n1, n2, n3])
-    if abs(np.linalg.det(m)) < 1e-12:
+    """The point on three planes (Cramer's rule: the same bits on every CPU, sgim/portable.py)."""
+    m = np.array([n1, n2, n3], float)
+    det = det3(m)
+    if abs(det) < 1e-12:
         raise WedgeError("three of the planes are parallel to one line: no wedge vertex")
-    return np.linalg.solve(m, np.array([d1, d2, d3]))
+    rhs = np.array([d1, d2, d3], float)
+    out = np.empty(3)
+    for k in range(3):
+        mk = m.copy()
+        mk[:, k] = rhs
+        out[k] = det3(mk) / det
+    return out
 
 
 def wedge_geometry(joint_a, joint_b, face, top=None, height=10.0):
@@ -109,23 +118,24 @@ def wedge_geometry(joint_a, joint_b, face, top=None, height=10.0):
         raise WedgeError(f"height must be > 0 (got {height})")
     if face[0] <= 0 or face[0] > 90:
         raise WedgeError(f"face dip must be in (0, 90] (got {face[0]})")
-    fd, fa = np.radians(face[0]), np.radians(face[1])
-    up_face = -np.array([np.sin(fa) * np.cos(fd), np.cos(fa) * np.cos(fd), -np.sin(fd)])  # up the dip line
-    crest = up_face * height / np.sin(fd)
-    dt = float(t @ crest)
-    if abs(np.dot(a, b)) > 1 - 1e-12:
+    sfd, cfd = sin_cos_deg(face[0])
+    sfa, cfa = sin_cos_deg(face[1])
+    up_face = -np.array([sfa * cfd, cfa * cfd, -sfd])  # up the dip line
+    crest = up_face * height / sfd
+    dt = matmul(t, crest)
+    if abs(matmul(a, b)) > 1 - 1e-12:
         raise WedgeError("the two joints are parallel")
     o = np.zeros(3)
     p5 = _meet(a, 0.0, b, 0.0, t, dt)
     p1 = _meet(a, 0.0, f, 0.0, t, dt)
     p2 = _meet(b, 0.0, f, 0.0, t, dt)
     ln = np.cross(a, b)
-    ln /= np.linalg.norm(ln)
+    ln /= norm(ln)
     if ln[2] > 0:
         ln = -ln
     eps = 1e-9 * height
-    ok = (f @ p5 < -eps and b @ p1 > eps and a @ p2 > eps and t @ o < dt - eps and ln[2] < -1e-12
-          and np.dot(p5 - o, ln) < 0)
+    ok = (matmul(f, p5) < -eps and matmul(b, p1) > eps and matmul(a, p2) > eps and matmul(t, o) < dt - eps
+          and ln[2] < -1e-12 and matmul(p5 - o, ln) < 0)
     if not ok:
         raise WedgeError("the line of intersection of the joints does not daylight in the slope face below "
                          "the top surface: no wedge can slide out")

@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sgim.portable import matmul
 from sgim.scene import SceneError, _Reader
 
 from .simulation import ContactLaw
@@ -142,7 +143,7 @@ class DDAScene:
         for axis, sign, value in sp["fixed"]:
             fixed |= sign * (c[:, axis] - value) > 0
         for normal, point in sp.get("fixed_below", ()):
-            fixed |= (c - point) @ normal < 0
+            fixed |= matmul(c - point, normal) < 0
         return fixed
 
     def sphere_loads(self, centers):
@@ -200,7 +201,7 @@ def load_region(load, centers):
     kind, spec = load["region"]
     if kind == "below":
         normal, point = spec
-        return (c - point) @ normal < 0
+        return matmul(c - point, normal) < 0
     mask = np.ones(len(c), bool)
     for axis, sign, value in spec:
         mask &= sign * (c[:, axis] - value) > 0
@@ -357,7 +358,7 @@ def _read_spheres(rd, data, path):
         for axis, sign, value in regions:
             fixed |= sign * (c[:, axis] - value) > 0
         for normal, point in below:
-            fixed |= (c - point) @ normal < 0
+            fixed |= matmul(c - point, normal) < 0
         out["loads"] = _read_sphere_loads(rd, st["load"], c, fixed)
     return out
 

@@ -22,12 +22,14 @@ edge (no turn) are removed.
 
 from __future__ import annotations
 
+import math
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from sgim.geometry import MeshError
+from sgim.portable import each2, matmul, norm, sin_cos_deg
 
 from .blockspec import BlockSpec
 
@@ -57,7 +59,7 @@ def face_normals(spec: BlockSpec) -> np.ndarray:
     for k, f in enumerate(spec.faces):
         p = v[f]
         n = _cross(p, np.roll(p, -1, axis=0)).sum(0)
-        out[k] = n / np.linalg.norm(n)
+        out[k] = n / norm(n)
     return out
 
 
@@ -90,7 +92,7 @@ def check_convex(spec: BlockSpec, tol: float = 1e-9) -> list[str]:
     problems = []
     if len(v) < 4 or len(faces) < 4:
         return [f"needs at least 4 vertices and 4 faces (has {len(v)}, {len(faces)})"]
-    scale = float(np.linalg.norm(np.ptp(v, axis=0))) or 1.0
+    scale = norm(np.ptp(v, axis=0)) or 1.0
     # closed and consistently oriented: every directed edge once, its reverse once
     directed = {}
     for k, f in enumerate(faces):
@@ -114,12 +116,12 @@ def check_convex(spec: BlockSpec, tol: float = 1e-9) -> list[str]:
         return [f"volume {vol:g} is not positive (faces inward or flat)"]
     n = face_normals(spec)
     for k, f in enumerate(faces):
-        d = v @ n[k] - n[k] @ v[f[0]]
+        d = matmul(v, n[k]) - matmul(n[k], v[f[0]])
         if np.abs(d[f]).max() > tol * scale:
             problems.append(f"face {k} is not planar (off by {np.abs(d[f]).max():.3g})")
         if d.max() > tol * scale:
             problems.append(f"vertex {int(d.argmax())} lies {d.max():.3g} outside face {k}: not convex")
-        if n[k] @ (v[f[0]] - c) <= 0:
+        if matmul(n[k], v[f[0]] - c) <= 0:
             problems.append(f"face {k} normal points inward")
     return problems
 
@@ -131,11 +133,11 @@ def check_convex(spec: BlockSpec, tol: float = 1e-9) -> list[str]:
 def _order_polygon(points, normal):
     c = points.mean(0)
     u = points[np.argmax(np.linalg.norm(points - c, axis=1))] - c
-    u -= normal * (normal @ u)
-    u /= np.linalg.norm(u)
+    u -= normal * matmul(normal, u)
+    u /= norm(u)
     w = _cross(normal, u)
     d = points - c
-    return np.argsort(np.arctan2(d @ w, d @ u), kind="stable")
+    return np.argsort(each2(math.atan2, matmul(d, w), matmul(d, u)), kind="stable")
 
 
 def _drop_collinear(loop, pts, eps):
@@ -163,7 +165,7 @@ def convex_hull(points, tol: float = 1e-9, **fields) -> BlockSpec:
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) < 4 or not np.all(np.isfinite(pts)):
         raise GeometryError(f"a convex hull needs at least 4 finite points (got {len(pts)})")
-    scale = float(np.linalg.norm(np.ptp(pts, axis=0)))
+    scale = norm(np.ptp(pts, axis=0))
     try:
         hull = ConvexHull(pts)
     except QhullError:
@@ -200,7 +202,7 @@ def convex_hull(points, tol: float = 1e-9, **fields) -> BlockSpec:
         p = pts[simp[tris]]
         area = np.linalg.norm(_cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         an = (eq[tris, :3] * area[:, None]).sum(0)
-        nrm = an / np.linalg.norm(an)
+        nrm = an / norm(an)
         order = _order_polygon(pts[idx], nrm)
         loop = [int(i) for i in idx[order]]
         loop = _drop_collinear(loop, pts, max(tol, 1e-12))
@@ -221,7 +223,7 @@ def transformed(spec: BlockSpec, rotation=None, translation=(0.0, 0.0, 0.0), abo
     if rotation is not None:
         r = np.asarray(rotation, float).reshape(3, 3)
         c = volume_centroid(spec)[1] if about is None else np.asarray(about, float)
-        v = (v - c) @ r.T + c
+        v = matmul(v - c, r.T) + c
     v = v + np.asarray(translation, float)
     keep = dict(name=spec.name, fixed=spec.fixed, velocity=spec.velocity, angular_velocity=spec.angular_velocity,
                 material=spec.material, dof=spec.dof)
@@ -232,9 +234,9 @@ def transformed(spec: BlockSpec, rotation=None, translation=(0.0, 0.0, 0.0), abo
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A rotation matrix drawn uniformly on SO(3) (unit quaternion from four normal deviates)."""
     q = rng.standard_normal(4)
-    while np.linalg.norm(q) < 1e-12:
+    while norm(q) < 1e-12:
         q = rng.standard_normal(4)
-    w, x, y, z = q / np.linalg.norm(q)
+    w, x, y, z = q / norm(q)
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
@@ -245,10 +247,10 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 def rotation_about(axis, angle_deg) -> np.ndarray:
     """Rotation matrix by ``angle_deg`` about ``axis`` (right-hand rule)."""
     a = np.asarray(axis, float)
-    a = a / np.linalg.norm(a)
-    t = np.radians(angle_deg)
+    a = a / norm(a)
+    s, c = sin_cos_deg(angle_deg)
     k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(t) * k + (1 - np.cos(t)) * (k @ k)
+    return np.eye(3) + s * k + (1 - c) * matmul(k, k)
 
 
 # ---------------------------------------------------------------------------------------------------------

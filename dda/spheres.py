@@ -60,6 +60,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sgim.portable import matmul
+
 from . import _spheres as _sp
 from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
 from .simulation import BlowUpError, ContactLaw
@@ -309,7 +311,7 @@ class SphereSimulation:
 
             specs = []
             for i in range(A.n):
-                v = A.pos[i] + A.vloc[A.vert_start[i]:A.vert_start[i + 1]] @ quat_to_matrix(A.quat[i]).T
+                v = A.pos[i] + matmul(A.vloc[A.vert_start[i]:A.vert_start[i + 1]], quat_to_matrix(A.quat[i]).T)
                 faces = [list(A.face_verts[A.face_vert_start[f]:A.face_vert_start[f + 1]] - A.vert_start[i])
                          for f in range(A.face_start[i], A.face_start[i + 1])]
                 specs.append(BlockSpec(v, faces))

@@ -36,6 +36,7 @@ import time
 import numpy as np
 
 from sgim.cli import EXIT_BAD_INPUT
+from sgim.portable import matmul, norm
 
 from . import hoekbray
 
@@ -126,7 +127,7 @@ class WedgeModel:
         self.specs = wedge_blocks(joint_a=joint_a, joint_b=joint_b, face=face, top=top, height=height)
         self.density = unit_weight * 1000.0 / G
         o, p5 = self.geom.vertices[0], self.geom.vertices[1]
-        self.line = (o - p5) / np.linalg.norm(o - p5)
+        self.line = (o - p5) / norm(o - p5)
         size = float(np.ptp(self.geom.vertices, axis=0).max())
         weight = self.density * self.geom.volume * G
         self.kn = float(kn) if kn is not None else weight / (3.0 * penetration * size)
@@ -188,13 +189,13 @@ class WedgeModel:
         settled state, after the friction of every contact is lowered to ``phi``."""
         sim = copy.deepcopy(self.settled())
         sim.lawtab[:, :, 2] = math.tan(math.radians(float(phi)))
-        s0 = float(sim.displacement(0) @ self.line)
+        s0 = matmul(sim.displacement(0), self.line)
         marks = []
         t = 0.0
         for frac in (0.5, 0.75, 1.0):
             sim.run(frac * self.duration - t, record_every=self.duration)
             t = frac * self.duration
-            marks.append(float(sim.displacement(0) @ self.line) - s0)
+            marks.append(matmul(sim.displacement(0), self.line) - s0)
         self.runs.append((phi, marks, sim.steps))
         return marks
 

@@ -86,6 +86,7 @@ import numpy as np
 
 from . import _dfn as K
 from .geometry import dip_to_normal
+from .portable import norm
 from .scene import SceneError
 
 CHUNK = 4096  # candidates per block; part of the reproducibility contract, never change
@@ -493,7 +494,7 @@ def fisher_normals(pole, kappa, u):
     t = np.minimum(-np.log(e + up * (-math.expm1(-2.0 * kappa))) / kappa, 2.0)  # 1 - cos(theta)
     st = np.sqrt(t * (2.0 - t))
     phi = 2.0 * math.pi * u[:, 1]
-    p = np.asarray(pole, float) / np.linalg.norm(pole)
+    p = np.asarray(pole, float) / norm(pole)
     ux, uy, uz, vx, vy, vz = K.plane_basis(p)
     a, b, w = st * np.cos(phi), st * np.sin(phi), 1.0 - t
     return np.column_stack([a * ux + b * vx + w * p[0], a * uy + b * vy + w * p[1], a * uz + b * vz + w * p[2]])

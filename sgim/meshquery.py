@@ -61,6 +61,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _meshq as K
+from .portable import norm
 
 __all__ = ["TriMesh", "MeshSet"]
 
@@ -114,7 +115,7 @@ class TriMesh:
         rep = {"input_vertices": int(len(V)), "input_faces": int(len(F))}
 
         # 1. weld near-duplicate vertices
-        diag = float(np.linalg.norm(np.ptp(V, axis=0))) if len(V) else 0.0
+        diag = norm(np.ptp(V, axis=0)) if len(V) else 0.0
         tol = weld * diag
         if tol > 0 and len(V) > 1:
             from scipy.spatial import cKDTree
@@ -277,7 +278,7 @@ class TriMesh:
 
     def hole_sizes(self):
         """Bounding-box diagonal of each boundary loop."""
-        return np.array([float(np.linalg.norm(np.ptp(self.vertices[h], axis=0))) for h in self.holes()])
+        return np.array([norm(np.ptp(self.vertices[h], axis=0)) for h in self.holes()])
 
     def nearly_closed(self, max_hole=None):
         """True when the mesh is closed up to small defects: every hole no larger than max_hole."""

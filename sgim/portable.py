@@ -64,17 +64,32 @@ def norm(x) -> float:
     return math.sqrt(s)
 
 
-def _jacobi3(s):
-    """Eigenvalues and eigenvectors (columns) of a symmetric 3 x 3 matrix by cyclic Jacobi rotations in a
+def each(f, x) -> np.ndarray:
+    """f (a function of the math module: the C library's, whatever numpy's SIMD dispatch would pick) applied
+    to every element of x; for the small arrays of geometry set-up (mesh sections, profiles)."""
+    x = np.asarray(x, float)
+    return np.array([f(float(v)) for v in x.ravel()], float).reshape(x.shape)
+
+
+def each2(f, x, y) -> np.ndarray:
+    """f(x, y) of the math module element by element (``each`` for two arguments, e.g. math.atan2)."""
+    x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+    return np.array([f(float(a), float(b)) for a, b in zip(x.ravel(), y.ravel())], float).reshape(x.shape)
+
+
+def _jacobi(s):
+    """Eigenvalues and eigenvectors (columns) of a symmetric n x n matrix by cyclic Jacobi rotations in a
     fixed order (plain floats, correctly rounded operations only)."""
-    a = [[float(s[i][j]) for j in range(3)] for i in range(3)]
-    vec = [[1.0 if i == j else 0.0 for j in range(3)] for i in range(3)]
-    scale = sum(abs(a[i][j]) for i in range(3) for j in range(i, 3))
+    n = len(s)
+    a = [[float(s[i][j]) for j in range(n)] for i in range(n)]
+    vec = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
+    scale = sum(abs(a[i][j]) for i in range(n) for j in range(i, n))
+    pairs = [(p, q) for p in range(n - 1) for q in range(p + 1, n)]
     for _sweep in range(64):
-        off = abs(a[0][1]) + abs(a[0][2]) + abs(a[1][2])
+        off = sum(abs(a[p][q]) for p, q in pairs)
         if off <= 1e-300 or off <= 1e-18 * scale:
             break
-        for p, q in ((0, 1), (0, 2), (1, 2)):
+        for p, q in pairs:
             apq = a[p][q]
             if apq == 0.0:
                 continue
@@ -84,20 +99,70 @@ def _jacobi3(s):
                 t = -t
             c = 1.0 / math.sqrt(t * t + 1.0)
             sn = t * c
-            for k in range(3):  # A <- A J (columns p, q)
+            for k in range(n):  # A <- A J (columns p, q)
                 akp, akq = a[k][p], a[k][q]
                 a[k][p] = c * akp - sn * akq
                 a[k][q] = sn * akp + c * akq
-            for k in range(3):  # A <- J^T A (rows p, q)
+            for k in range(n):  # A <- J^T A (rows p, q)
                 apk, aqk = a[p][k], a[q][k]
                 a[p][k] = c * apk - sn * aqk
                 a[q][k] = sn * apk + c * aqk
             a[p][q] = a[q][p] = 0.0
-            for k in range(3):
+            for k in range(n):
                 vkp, vkq = vec[k][p], vec[k][q]
                 vec[k][p] = c * vkp - sn * vkq
                 vec[k][q] = sn * vkp + c * vkq
-    return np.array([a[0][0], a[1][1], a[2][2]]), np.array(vec)
+    return np.array([a[i][i] for i in range(n)]), np.array(vec)
+
+
+def eigvalsh(s) -> np.ndarray:
+    """Eigenvalues (ascending) of a symmetric matrix, the same bits on every CPU (np.linalg.eigvalsh calls
+    LAPACK)."""
+    s = np.asarray(s, float)
+    return np.sort(_jacobi(0.5 * (s + s.T))[0])
+
+
+def cholesky(a) -> np.ndarray:
+    """Lower-triangular L with L L^T = a (a symmetric positive definite), summed in index order."""
+    a = np.asarray(a, float)
+    n = len(a)
+    low = np.zeros((n, n))
+    for j in range(n):
+        d = float(a[j, j])
+        for k in range(j):
+            d -= float(low[j, k]) * float(low[j, k])
+        if not d > 0.0:
+            raise ValueError("cholesky: the matrix is not positive definite")
+        low[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            x = float(a[i, j])
+            for k in range(j):
+                x -= float(low[i, k]) * float(low[j, k])
+            low[i, j] = x / low[j, j]
+    return low
+
+
+def inv(a) -> np.ndarray:
+    """Inverse of a square matrix by Gauss-Jordan elimination with partial pivoting in a fixed order (the
+    same bits on every CPU; np.linalg.inv calls LAPACK)."""
+    m = [[float(x) for x in row] for row in np.asarray(a, float)]
+    n = len(m)
+    out = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
+    for c in range(n):
+        piv = max(range(c, n), key=lambda r: (abs(m[r][c]), -r))
+        if m[piv][c] == 0.0:
+            raise ValueError("inv: the matrix is singular")
+        m[c], m[piv] = m[piv], m[c]
+        out[c], out[piv] = out[piv], out[c]
+        d = m[c][c]
+        m[c] = [x / d for x in m[c]]
+        out[c] = [x / d for x in out[c]]
+        for r in range(n):
+            if r != c and m[r][c] != 0.0:
+                f = m[r][c]
+                m[r] = [x - f * y for x, y in zip(m[r], m[c])]
+                out[r] = [x - f * y for x, y in zip(out[r], out[c])]
+    return np.array(out)
 
 
 def eigh3(s):
@@ -105,7 +170,7 @@ def eigh3(s):
     every CPU (np.linalg.eigh calls LAPACK). Each eigenvector's largest component is made positive and the
     frame right-handed (the last column flipped when needed)."""
     s = np.asarray(s, float).reshape(3, 3)
-    w, vec = _jacobi3(0.5 * (s + s.T))
+    w, vec = _jacobi(0.5 * (s + s.T))
     order = sorted(range(3), key=lambda k: (w[k], k))
     w = w[order]
     vec = vec[:, order]

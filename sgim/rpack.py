@@ -73,6 +73,7 @@ from numba import njit, prange
 from . import _excavate as EX
 from . import _rpack as K
 from .grading import Grading, NearObjects, empty_mesh_data, read_grading, scene_names
+from .portable import norm
 
 LAWS = ("uniform", "lognormal", "sieve")
 POOL = 32  # pooled radii (a law): each pocket takes the largest that fits
@@ -377,7 +378,7 @@ class Region:
         hs = ext / n
         g = [lo[a] + hs[a] * (np.arange(n[a]) + 0.5) for a in range(3)]
         cen = np.stack(np.meshgrid(*g, indexing="ij"), -1).reshape(-1, 3)
-        half = 0.5 * float(np.linalg.norm(hs))
+        half = 0.5 * norm(hs)
         ins = self.contains(cen)
         near = self._near_boundary(cen, half)
         vol = float((ins & ~near).sum()) * float(np.prod(hs))

@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from .portable import each, matmul, norm
+
 
 class ShapeError(ValueError):
     """A shape parameter is unusable; ``where`` names the parameter, ``value`` the value."""
@@ -40,15 +42,15 @@ def frame(t):
     """(u, v) of the section plane for unit tangent t."""
     t = np.asarray(t, float)
     ref = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 1.0 - 1e-9 else np.array([1.0, 0.0, 0.0])
-    v = ref - (ref @ t) * t
-    v /= np.linalg.norm(v)
+    v = ref - matmul(ref, t) * t
+    v /= norm(v)
     u = np.cross(v, t)
     return u, v
 
 
 def circular_section(radius, segments):
     a = 2.0 * np.pi * np.arange(segments) / segments
-    return np.column_stack([radius * np.cos(a), radius * np.sin(a)])
+    return np.column_stack([radius * each(math.cos, a), radius * each(math.sin, a)])
 
 
 def horseshoe_section(width, height, segments):
@@ -58,7 +60,7 @@ def horseshoe_section(width, height, segments):
     hs = height - rc  # spring line
     narc = max(int(segments) - 3, 4)
     a = np.pi * np.arange(narc + 1) / narc
-    arc = np.column_stack([rc * np.cos(a), hs + rc * np.sin(a)])
+    arc = np.column_stack([rc * each(math.cos, a), hs + rc * each(math.sin, a)])
     pts = [[-rc, 0.0], [rc, 0.0]]
     # with no wall (height = width / 2) the arc ends are the invert corners already
     pts += (arc if hs > 1e-12 * width else arc[1:-1]).tolist()
@@ -79,12 +81,12 @@ def _rings(path, section, piece):
     # mitre normals: caps perpendicular to the end segments
     M = [T[0]]
     for i in range(1, len(P) - 1):
-        c = float(np.clip(T[i - 1] @ T[i], -1.0, 1.0))
+        c = float(np.clip(matmul(T[i - 1], T[i]), -1.0, 1.0))
         bend = math.degrees(math.acos(c))
         if bend > MAX_BEND_DEG:
             raise ShapeError(f"bend of {bend:.1f} degrees exceeds {MAX_BEND_DEG:g}", f"path[{i}]", P[i].tolist())
         m = T[i - 1] + T[i]
-        M.append(m / np.linalg.norm(m))
+        M.append(m / norm(m))
     M.append(T[-1])
     rings = []
     for i in range(len(P) - 1):
@@ -92,8 +94,8 @@ def _rings(path, section, piece):
         u, v = frame(t)
         base = section[:, :1] * u + section[:, 1:] * v  # (ns, 3) offsets from the axis
         # position along t of each ring point in the mitre planes at both ends
-        s0 = -(base @ M[i]) / (t @ M[i])
-        s1 = -(base @ M[i + 1]) / (t @ M[i + 1]) + L[i]
+        s0 = -matmul(base, M[i]) / matmul(t, M[i])
+        s1 = -matmul(base, M[i + 1]) / matmul(t, M[i + 1]) + L[i]
         if np.any(s1 <= s0 + 1e-9 * L[i]):
             raise ShapeError("path segment too short for its bends and the section size",
                              f"path[{i}]..path[{i + 1}]", [P[i].tolist(), P[i + 1].tolist()])
@@ -163,8 +165,8 @@ def ellipsoid(centre, radii, segments=48):
     nlat = max(nlon // 2, 4)
     th = np.pi * np.arange(1, nlat) / nlat  # polar angle of the inner rings
     ph = 2 * np.pi * np.arange(nlon) / nlon
-    ring = np.stack([np.outer(np.sin(th), np.cos(ph)), np.outer(np.sin(th), np.sin(ph)),
-                     np.outer(np.cos(th), np.ones(nlon))], -1).reshape(-1, 3)
+    sth, cth, sph, cph = each(math.sin, th), each(math.cos, th), each(math.sin, ph), each(math.cos, ph)
+    ring = np.stack([np.outer(sth, cph), np.outer(sth, sph), np.outer(cth, np.ones(nlon))], -1).reshape(-1, 3)
     V = np.vstack([ring, [[0, 0, 1]], [[0, 0, -1]]]) * r + np.asarray(centre, float)
     top, bot = len(ring), len(ring) + 1
     F = []
@@ -208,7 +210,7 @@ def listric_profile(dip_top, dip_bottom, depth, d):
     d = np.asarray(d, float)
     if abs(b) * depth < 1e-12:
         return d / math.tan(a)
-    return np.log(np.sin(a + b * d) / math.sin(a)) / b
+    return each(math.log, each(math.sin, a + b * d) / math.sin(a)) / b
 
 
 def listric(trace, dip_direction, dip_top, dip_bottom, depth, length, resolution):
@@ -229,7 +231,7 @@ def listric(trace, dip_direction, dip_top, dip_bottom, depth, length, resolution
     # down-dip samples spaced by arc length about ``resolution``
     fine = np.linspace(0.0, depth, 2001)
     xf = listric_profile(dip_top, dip_bottom, depth, fine)
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xf), np.diff(fine)))])
+    arc = np.concatenate([[0.0], np.cumsum(np.sqrt(np.diff(xf) ** 2 + np.diff(fine) ** 2))])
     nd = max(int(math.ceil(arc[-1] / resolution)), 1)
     na = max(int(math.ceil(length / resolution)), 1)
     if (nd + 1) * (na + 1) > 4_000_000:
