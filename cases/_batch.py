@@ -55,6 +55,7 @@ from collections import deque
 from pathlib import Path
 
 from sgim.cli import CliError
+from sgim.outdir import write_marker
 from sgim.readback import BadFile
 
 FIXED_COLUMNS = ("case_id", "status", "error", "wall_s", "rank")
@@ -602,8 +603,6 @@ def _remove_study(outdir, old):
 
 
 def _prepare(study, outdir, force=False):
-    from sgim.outdir import write_marker
-
     _check_folder(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     lock = open(outdir / ".lock", "a+")
@@ -630,7 +629,6 @@ def _prepare(study, outdir, force=False):
                            "cases, engine or results): use a new output folder, or --force to replace it")
         if not same:
             _remove_study(outdir, old)
-    write_marker(outdir, STUDY_COMMAND, study_files(c.case_id for c in study.cases) + [".lock"])
     if not same:
         tmp = sj.with_name("study.json.tmp")
         tmp.write_text(json.dumps(info, indent=1))
@@ -662,6 +660,8 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
                 raise BadFile(table.csv_path, f"line {no}: case {cid} is not a case of this study")
         if retry_failed:
             table.drop({"failed", "timeout"})
+        # the marker only once the tables read back: a refused restart leaves the folder as it was
+        write_marker(outdir, STUDY_COMMAND, study_files(c.case_id for c in study.cases) + [".lock"])
     except BaseException:
         local.kill()
         if comm is not None:
