@@ -180,10 +180,13 @@ class DDAScene:
         from .simulation import Simulation
 
         bs = self.block_system()
-        sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
-                         local_damping=self.local_damping, pair_laws=self.pair_laws, **self.sleep)
-        if check:
+
+        def step_check(sim):
             check_block_run(self, sim, max_steps=max_steps, duration=duration)
+
+        sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
+                         local_damping=self.local_damping, pair_laws=self.pair_laws,
+                         on_dt=step_check if check else None, **self.sleep)
         return bs, sim
 
 

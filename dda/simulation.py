@@ -102,7 +102,9 @@ class BlowUpError(RuntimeError):
 class Simulation:
     def __init__(self, system, law: ContactLaw | None = None, gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5,
                  local_damping=0.0, pair_laws=None, cell_factor=1.5, blowup_ratio=0.5, sleep=False,
-                 sleep_velocity=None, sleep_accel=None, sleep_steps=200):
+                 sleep_velocity=None, sleep_accel=None, sleep_steps=200, on_dt=None):
+        """`on_dt(sim)`, if given, is called as soon as the time step is known, before any kernel is loaded
+        (the step limit of dda/limits.py refuses an endless run at once)."""
         self.system = system
         self.law = law or ContactLaw()
         self.gravity = np.asarray(gravity, float)
@@ -143,6 +145,13 @@ class Simulation:
         self.active = np.nonzero(~A.fixed)[0].astype(np.int64)
         self.movable = self.active.copy()
         self.free = np.nonzero(~A.fixed & ~A.kin)[0].astype(np.int64)
+        # time step
+        self.dt_crit = self.critical_dt()
+        self.dt = float(dt) if dt is not None else self.safety * self.dt_crit
+        if not self.dt > 0:
+            raise ValueError(f"time step must be > 0 (got {dt!r})")
+        if on_dt is not None:
+            on_dt(self)
         self.asleep = np.zeros(nb, bool)
         self.calm = np.zeros(nb, np.int64)
         self.pe_sl = np.zeros(nb)
@@ -195,11 +204,6 @@ class Simulation:
             raise ValueError("sleep thresholds must be > 0 and sleep_steps >= 1")
         self.sleep_par = np.array([1.0 if sleep else 0.0, v_s, a_s, float(int(sleep_steps))])
         self.first_step = True
-        # time step
-        self.dt_crit = self.critical_dt()
-        self.dt = float(dt) if dt is not None else self.safety * self.dt_crit
-        if not self.dt > 0:
-            raise ValueError(f"time step must be > 0 (got {dt!r})")
         # dt(0) = 0: the first step is a half step, v(1/2) = v(0) + dt/2 a(0), so the given initial
         # velocities are those at t = 0 (free fall then follows x = x0 + v0 t + g t^2 / 2 exactly)
         self.dt_prev = 0.0
