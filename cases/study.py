@@ -62,6 +62,7 @@ METHODS = ("grid", "random", "lhs", "realisations")
 AXIS_KINDS = ("grid", "list", "realisations")
 SAMPLED_KINDS = ("uniform", "normal", "fisher")
 PARAM_KINDS = AXIS_KINDS + SAMPLED_KINDS
+MAX_CASES = 1_000_000  # cases per study: each is a row of the table and usually an engine run
 
 
 # --------------------------------------------------------------------------------------------- evaluators
@@ -367,6 +368,8 @@ def load_study(path, check_engine=True) -> Study:
             err("sampling.samples", None, f"missing value (the number of {method} samples)")
         if isinstance(samples, bool) or not isinstance(samples, int) or samples <= 0:
             err("sampling.samples", samples, "must be an integer > 0")
+        if samples > MAX_CASES:
+            err("sampling.samples", samples, f"must be <= {MAX_CASES} (cases)")
         if not sampled:
             err("sampling.method", method, "no sampled parameter (uniform, normal or fisher) to draw")
     else:
@@ -379,6 +382,11 @@ def load_study(path, check_engine=True) -> Study:
         if method == "realisations" and not any(p.kind == "realisations" for p in params):
             err("sampling.method", method, "no { realisations = N } parameter")
 
+    total = math.prod(len(p.spec) if p.kind == "grid" else p.spec for p in params if p.kind in AXIS_KINDS)
+    total *= samples if method in ("random", "lhs") else 1
+    if total > MAX_CASES:
+        err("parameters", f"{total} cases", f"more than {MAX_CASES} cases (the product of the axes"
+                                           f"{' and the samples' if method in ('random', 'lhs') else ''})")
     study = Study(path=path, name=name, base=base, base_scene=base_scene, engine=engine, results=results,
                   seed=seed, timeout=float(timeout) if timeout is not None else None, method=method,
                   samples=samples, params=params, needs=tuple(needs))
@@ -406,10 +414,16 @@ def _read_param(err, key, ppath, spec, base_scene, base):
         for v in val:
             if not _compatible(node, v):
                 err(key, v, f"does not fit the base scene's value {node!r} ({target})")
+            if _is_number(v) and not math.isfinite(v):
+                err(key, v, "must be finite (a case with NaN or inf would only fail)")
+        if len(val) > MAX_CASES:
+            err(key, f"{len(val)} values", f"more than {MAX_CASES} values")
         return Param(ppath, "grid", list(val), target)
     if kind == "realisations":
         if isinstance(val, bool) or not isinstance(val, int) or val <= 0:
             err(key, spec, "realisations must be an integer > 0")
+        if val > MAX_CASES:
+            err(key, spec, f"realisations must be <= {MAX_CASES} (cases)")
         if target != "int":
             err(key, spec, f"realisations vary a seed: the base scene's value must be an integer, not {node!r}")
         return Param(ppath, "realisations", val, target)

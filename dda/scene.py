@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from sgim.portable import matmul
-from sgim.scene import SceneError, _Reader
+from sgim.scene import COORD, LENGTH, MAX_COORD, SceneError, _Reader
 
 from .simulation import ContactLaw
 
@@ -66,6 +66,12 @@ SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", 
 SPHERE_KEYS |= {"load"}  # [[spheres.load]]: loaded regions (constant force or prescribed velocity)
 SPHERE_LOAD_KEYS = {"region", "below", "force", "velocity"}
 LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
+# Numerical guards far beyond any rock or engine setting (the resource limits refuse the long runs that stiff or
+# light settings ask for, dda/limits.py): above these the critical time step, masses and energies overflow.
+STIFFNESS = {"hi": 1e40, "unit": " N/m"}  # contact and bond stiffness
+MODULUS = {"hi": 1e40, "unit": " Pa"}  # Young's modulus of blocks and bonds
+DENSITY = {"hi": 1e40, "unit": " kg/m3"}
+RATIO = {"hi": 1e3, "unit": ""}  # dimensionless factors (bond shear / normal stiffness, bond radius)
 
 
 @dataclass
@@ -277,7 +283,7 @@ def _read_sphere_loads(rd, raw, centers, fixed):
         else:
             from sgim.geometry import dip_to_normal
 
-            row = rd.vector(lt, "below", f"{key}.below", n=5)
+            row = rd.vector(lt, "below", f"{key}.below", n=5, **COORD)
             if not (0.0 <= row[0] <= 90.0 and -360.0 <= row[1] <= 360.0):
                 rd.err(f"{key}.below", row.tolist(), "dip must be 0..90 and dip direction -360..360 deg")
             region = ("below", (np.asarray(dip_to_normal(row[0], row[1]), float), np.asarray(row[2:5], float)))
@@ -318,14 +324,16 @@ def _read_spheres(rd, data, path):
             rd.err("spheres.fixed", e, str(exc))
     inf = float("inf")
     law = BondLaw(
-        young=rd.number(st, "bond_young", "spheres.bond_young", default=1e9, positive=True),
-        kn=rd.number(st, "bond_kn", "spheres.bond_kn", positive=True) if "bond_kn" in st else None,
-        ks=rd.number(st, "bond_ks", "spheres.bond_ks", nonneg=True) if "bond_ks" in st else None,
-        shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio", default=0.4, nonneg=True),
+        young=rd.number(st, "bond_young", "spheres.bond_young", default=1e9, positive=True, **MODULUS),
+        kn=rd.number(st, "bond_kn", "spheres.bond_kn", positive=True, **STIFFNESS) if "bond_kn" in st else None,
+        ks=rd.number(st, "bond_ks", "spheres.bond_ks", nonneg=True, **STIFFNESS) if "bond_ks" in st else None,
+        shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio", default=0.4, nonneg=True,
+                              **RATIO),
         tensile=rd.number(st, "bond_tensile", "spheres.bond_tensile", default=inf, nonneg=True),
         shear=rd.number(st, "bond_shear", "spheres.bond_shear", default=inf, nonneg=True),
         damping=rd.number(st, "bond_damping", "spheres.bond_damping", default=0.0, nonneg=True, hi=1.0),
-        radius_factor=rd.number(st, "bond_radius_factor", "spheres.bond_radius_factor", default=1.0, positive=True),
+        radius_factor=rd.number(st, "bond_radius_factor", "spheres.bond_radius_factor", default=1.0, positive=True,
+                                **RATIO),
     )
     if mp.suffix.lower() == ".toml":  # an sgim scene: build its model in memory
         from sgim.build import build_model
@@ -340,12 +348,12 @@ def _read_spheres(rd, data, path):
             model = SphereModel.load(mp)  # validated: a file that is not a usable model is one BadFile line
         except BadFile as exc:
             rd.err("spheres.model", name, exc.what)
-    density = rd.number(st, "density", "spheres.density", default=2600.0, positive=True)
+    density = rd.number(st, "density", "spheres.density", default=2600.0, positive=True, **DENSITY)
     below = []
     if "fixed_below" in st:
         from sgim.geometry import dip_to_normal
 
-        rows = rd.matrix(st, "fixed_below", "spheres.fixed_below", 5)
+        rows = rd.matrix(st, "fixed_below", "spheres.fixed_below", 5, **COORD)
         for row in rows:
             if not (0.0 <= row[0] <= 90.0 and -360.0 <= row[1] <= 360.0):
                 rd.err("spheres.fixed_below", row.tolist(), "dip must be 0..90 and dip direction -360..360 deg")
@@ -366,15 +374,55 @@ def _read_spheres(rd, data, path):
     return out
 
 
+def _generator_types(rd, fn, params, key):
+    """A [[generate]] parameter whose default is a number, a string, a flag or a list of numbers must be given as
+    one (the generators would convert "13" to 13 without a word)."""
+    import inspect
+
+    sig = inspect.signature(fn).parameters
+    for p, v in params.items():
+        d = sig[p].default if p in sig else None
+        num = isinstance(v, (int, float)) and not isinstance(v, bool)
+        if isinstance(d, bool):
+            if not isinstance(v, bool):
+                rd.err(f"{key}.{p}", v, "must be true or false")
+        elif isinstance(d, (int, float)):
+            if not num:
+                rd.err(f"{key}.{p}", v, "must be a number")
+        elif isinstance(d, str):
+            if not isinstance(v, str):
+                rd.err(f"{key}.{p}", v, "must be a string")
+        elif isinstance(d, (tuple, list)) and d and all(isinstance(x, (int, float)) for x in d):
+            if not (isinstance(v, list) and len(v) == len(d)
+                    and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+                rd.err(f"{key}.{p}", v, f"must be a list of {len(d)} numbers")
+
+
+def _generator_numbers(rd, value, key, seed=False):
+    """Every number of a [[generate]] parameter (lists and tables included) is finite and, but for a seed, within
+    +-MAX_COORD: the generators take lengths, coordinates, angles and counts."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _generator_numbers(rd, v, f"{key}.{k}", seed)
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _generator_numbers(rd, v, f"{key}[{i}]", seed)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        rd.check_number(value, key)
+        if not seed and abs(value) > MAX_COORD:
+            rd.err(key, value, f"must be within +-{MAX_COORD:g} (lengths and coordinates in m, angles in degrees, "
+                               "counts)")
+
+
 def _law(rd, tab, key, base=None):
     rd.known(tab, LAW_KEYS | ({"materials"} if base is not None else set()), key)
     b = base or ContactLaw(kn=None)
-    kn = rd.number(tab, "kn", f"{key}.kn", default=b.kn, positive=True) if (base is not None or "kn" in tab) \
-        else rd.number(tab, "kn", f"{key}.kn", positive=True)
+    kn = rd.number(tab, "kn", f"{key}.kn", default=b.kn, positive=True, **STIFFNESS) \
+        if (base is not None or "kn" in tab) else rd.number(tab, "kn", f"{key}.kn", positive=True, **STIFFNESS)
     ks_default = b.ks if base is not None and b.ks is not None else kn / 2
     return ContactLaw(
         kn=kn,
-        ks=rd.number(tab, "ks", f"{key}.ks", default=ks_default, positive=True),
+        ks=rd.number(tab, "ks", f"{key}.ks", default=ks_default, positive=True, **STIFFNESS),
         friction_deg=rd.number(tab, "friction", f"{key}.friction", default=b.friction_deg, lo=0.0, hi=89.9),
         cohesion=rd.number(tab, "cohesion", f"{key}.cohesion", default=b.cohesion, nonneg=True),
         tensile=rd.number(tab, "tensile", f"{key}.tensile", default=b.tensile, nonneg=True),
@@ -440,8 +488,9 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
             rd.err(f"{key}.name", mname, "missing material name")
         if mname in materials:
             rd.err(f"{key}.name", mname, "material defined twice")
-        materials[mname] = Material(mname, rd.number(mt, "density", f"{key}.density", default=2600.0, positive=True),
-                                    rd.number(mt, "E", f"{key}.E", default=1e10, positive=True),
+        materials[mname] = Material(mname, rd.number(mt, "density", f"{key}.density", default=2600.0, positive=True,
+                                                     **DENSITY),
+                                    rd.number(mt, "E", f"{key}.E", default=1e10, positive=True, **MODULUS),
                                     rd.number(mt, "nu", f"{key}.nu", default=0.25, lo=0.0, hi=0.4999))
     pair_laws = {}
     for k, pt in enumerate(_list_of_tables(rd, data, "contact_pair")):
@@ -463,6 +512,9 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         if kind not in GENERATORS:
             rd.err(f"{key}.kind", kind, f"must be one of {', '.join(sorted(GENERATORS))}")
         params = {p: v for p, v in gt.items() if p != "kind"}
+        _generator_types(rd, GENERATORS[kind], params, key)
+        for p, v in params.items():
+            _generator_numbers(rd, v, f"{key}.{p}", seed=p == "seed")
         try:
             made = GENERATORS[kind](**params)
         except TypeError as exc:
@@ -510,7 +562,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         if bname not in names:
             rd.err(f"{key}.block", bname, "no block of that name")
         force = rd.vector(lt, "force", f"{key}.force")
-        point = rd.vector(lt, "point", f"{key}.point") if "point" in lt else None
+        point = rd.vector(lt, "point", f"{key}.point", **COORD) if "point" in lt else None
         loads.append((names[bname], point, force))
 
     ot = rd.table(data, "output", "output")
@@ -577,17 +629,19 @@ def _read_block(rd, bt, key, scene_path):
         from .shapes import SHAPES, GeometryError, rotation_about, shape
 
         sname = rd.choice(bt, "shape", f"{key}.shape", SHAPES, None)
-        size = rd.number(bt, "size", f"{key}.size", positive=True)
-        centre = rd.vector(bt, "center", f"{key}.center", default=(0.0, 0.0, 0.0))
+        size = rd.number(bt, "size", f"{key}.size", positive=True, **LENGTH)
+        centre = rd.vector(bt, "center", f"{key}.center", default=(0.0, 0.0, 0.0), **COORD)
         kw = {}
         for extra in ("width", "height"):
             if extra in bt:
-                kw[extra] = rd.number(bt, extra, f"{key}.{extra}", positive=True)
+                kw[extra] = rd.number(bt, extra, f"{key}.{extra}", positive=True, **LENGTH)
         if "sides" in bt:
             kw["sides"] = int(rd.number(bt, "sides", f"{key}.sides", lo=3, hi=64))
         rotation = None
         if "rotation_angle" in bt:
             axis = rd.vector(bt, "rotation_axis", f"{key}.rotation_axis", default=(0.0, 0.0, 1.0))
+            if np.abs(axis).max() > 0:
+                axis = axis / np.abs(axis).max()  # a direction: scaled first, so that its length cannot overflow
             if not np.linalg.norm(axis) > 0:
                 rd.err(f"{key}.rotation_axis", axis.tolist(), "must not be the zero vector")
             rotation = rotation_about(axis, rd.number(bt, "rotation_angle", f"{key}.rotation_angle"))
@@ -598,7 +652,7 @@ def _read_block(rd, bt, key, scene_path):
     elif form == "vertices":
         if "faces" not in bt:
             rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
-        verts = rd.matrix(bt, "vertices", f"{key}.vertices", 3)
+        verts = rd.matrix(bt, "vertices", f"{key}.vertices", 3, **COORD)
         faces = bt["faces"]
         if not isinstance(faces, list) or not faces:
             rd.err(f"{key}.faces", faces, "must be a non-empty list of vertex-index lists")

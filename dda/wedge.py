@@ -254,15 +254,17 @@ def _check_args(args):
     jb = parse_orientation(args.joint[1], "--joint")
     face = parse_orientation(args.face, "--face")
     top = parse_orientation(args.top, "--top")
-    for name, val, lo, hi in (("--height", args.height, 0, math.inf), ("--friction", args.friction, 0, 90),
-                              ("--unit-weight", args.unit_weight, 0, math.inf),
-                              ("--tolerance", args.tolerance, 0, 90), ("--step", args.step, 0, 90),
-                              ("--duration", args.duration, 0, math.inf),
-                              ("--penetration", args.penetration, 0, 1)):
+    # upper bounds: numerical guards (the wedge's volume, weight and settling threshold overflow beyond them;
+    # long or stiff runs are refused by the step limit, dda/limits.py)
+    for name, val, lo, hi, unit in (("--height", args.height, 0, 1e9, " m"), ("--friction", args.friction, 0, 90, ""),
+                                    ("--unit-weight", args.unit_weight, 0, 1e40, " kN/m3"),
+                                    ("--tolerance", args.tolerance, 0, 90, ""), ("--step", args.step, 0, 90, ""),
+                                    ("--duration", args.duration, 0, 1e12, " s"),
+                                    ("--penetration", args.penetration, 0, 1, "")):
         if not (math.isfinite(val) and lo < val < hi):
-            raise WedgeInputError(f"{name} = {val!r}: must be in ({lo}, {hi})")
-    if args.kn is not None and not (math.isfinite(args.kn) and args.kn > 0):
-        raise WedgeInputError(f"--kn = {args.kn!r}: must be > 0")
+            raise WedgeInputError(f"{name} = {val!r}: must be in ({lo:g}, {hi:g}){unit}")
+    if args.kn is not None and not (math.isfinite(args.kn) and 0 < args.kn <= 1e40):
+        raise WedgeInputError(f"--kn = {args.kn!r}: must be in (0, 1e+40] N/m")
     m = getattr(args, "max_steps", None)
     if m is not None and not (m >= 1 and m < 2 ** 63 and m == int(m)):
         raise WedgeInputError(f"--max-steps = {m!r}: must be a positive integer")

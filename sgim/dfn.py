@@ -85,13 +85,14 @@ from pathlib import Path
 import numpy as np
 
 from . import _dfn as K
-from .geometry import dip_to_normal
+from .geometry import MAX_COORD, dip_to_normal
 from .portable import norm
 from .scene import SceneError
 
 CHUNK = 4096  # candidates per block; part of the reproducibility contract, never change
 LAWS = ("constant", "power", "lognormal", "exponential")
 DEFAULT_MAX_FRACTURES = 200_000
+MAX_P32 = 1e6  # fracture area per volume [m2/m3]: a fracture every micrometre
 VTU_SEGMENTS = 24
 CSV_COLUMNS = ("id", "set", "cx", "cy", "cz", "nx", "ny", "nz", "dip", "dip_direction", "radius", "thickness",
                "area_in_domain")
@@ -336,24 +337,24 @@ def _read_radius(rd, js, key):
         rd.err(key, None, "missing value (a number for a constant radius, or a table with law = ...)")
     rt = js["radius"]
     if isinstance(rt, (int, float)) and not isinstance(rt, bool):
-        return RadiusLaw("constant", value=rd.check_number(rt, key, positive=True))
+        return RadiusLaw("constant", value=rd.check_number(rt, key, positive=True, hi=MAX_COORD, unit=" m"))
     if not isinstance(rt, dict):
         rd.err(key, rt, "must be a number (constant radius) or a table with law = ...")
     law = rd.choice(rt, "law", f"{key}.law", LAWS, None)
     if law == "constant":
         rd.known(rt, {"law", "value"}, key)
-        return RadiusLaw(law, value=rd.number(rt, "value", f"{key}.value", positive=True))
+        return RadiusLaw(law, value=rd.number(rt, "value", f"{key}.value", positive=True, hi=MAX_COORD, unit=" m"))
     allowed = {"law", "min", "max", {"power": "exponent", "exponential": "mean"}.get(law, "mu")}
     if law == "lognormal":
         allowed |= {"sigma", "mean", "sd"}
     rd.known(rt, allowed, key)
     if law == "power":
-        lo = rd.number(rt, "min", f"{key}.min", positive=True)
+        lo = rd.number(rt, "min", f"{key}.min", positive=True, hi=MAX_COORD, unit=" m")
     else:
-        lo = rd.number(rt, "min", f"{key}.min", default=0.0, nonneg=True)
+        lo = rd.number(rt, "min", f"{key}.min", default=0.0, nonneg=True, hi=MAX_COORD, unit=" m")
     hi = math.inf
     if "max" in rt:
-        hi = rd.check_number(rt["max"], f"{key}.max", positive=True)
+        hi = rd.check_number(rt["max"], f"{key}.max", positive=True, hi=MAX_COORD, unit=" m")
         if hi <= lo:
             rd.err(f"{key}.max", hi, f"must exceed {key}.min = {lo:g} (inverted radius bounds)")
     if law == "power":
@@ -367,7 +368,7 @@ def _read_radius(rd, js, key):
                                              f"(exponent > 4) to sample the domain's neighbourhood: give {key}.max")
         law_obj = RadiusLaw(law, exponent=a, min=lo, max=hi)
     elif law == "exponential":
-        mean = rd.number(rt, "mean", f"{key}.mean", positive=True)
+        mean = rd.number(rt, "mean", f"{key}.mean", positive=True, hi=MAX_COORD, unit=" m")
         if lo / mean > 200.0:
             rd.err(f"{key}.min", lo, f"lies {lo / mean:.3g} means into the exponential tail (at most 200)")
         law_obj = RadiusLaw(law, mean=mean, min=lo, max=hi)
@@ -379,8 +380,8 @@ def _read_radius(rd, js, key):
             mu = rd.number(rt, "mu", f"{key}.mu", lo=-50.0, hi=50.0)
             sigma = rd.number(rt, "sigma", f"{key}.sigma", positive=True, hi=10.0)
         else:
-            mean = rd.number(rt, "mean", f"{key}.mean", positive=True)
-            sd = rd.number(rt, "sd", f"{key}.sd", positive=True)
+            mean = rd.number(rt, "mean", f"{key}.mean", positive=True, hi=MAX_COORD, unit=" m")
+            sd = rd.number(rt, "sd", f"{key}.sd", positive=True, hi=MAX_COORD, unit=" m")
             s2 = math.log1p((sd / mean) ** 2)
             if s2 > 100.0:
                 rd.err(f"{key}.sd", sd, "too wide for a lognormal radius (sigma of ln r must be <= 10)")
@@ -412,10 +413,10 @@ def _read_joint_set(rd, js, key, k):
                + (", not both" if has else ""))
     p32 = count = None
     if has[0] == "p32":
-        p32 = rd.number(js, "p32", f"{key}.p32", positive=True)
+        p32 = rd.number(js, "p32", f"{key}.p32", positive=True, hi=MAX_P32, unit=" m2/m3")
     else:
         count = _int(rd, js, "count", f"{key}.count", 0, 1)
-    thick = rd.number(js, "thickness", f"{key}.thickness", default=0.0, nonneg=True)
+    thick = rd.number(js, "thickness", f"{key}.thickness", default=0.0, nonneg=True, hi=MAX_COORD, unit=" m")
     radius = _read_radius(rd, js, f"{key}.radius")
     return JointSet(name, key, dip, dd, kappa, radius, p32, count, thick)
 

@@ -14,6 +14,11 @@ import numpy as np
 from .portable import norm, sin_cos_deg
 
 
+# Coordinates and lengths in scenes and meshes lie within +-MAX_COORD metres: a million kilometres is beyond any
+# model, and squares and products of such numbers stay far from overflow (1e308).
+MAX_COORD = 1e9
+
+
 class MeshError(ValueError):
     def __init__(self, message, where="", value=None):
         super().__init__(message)
@@ -106,6 +111,8 @@ def load_mesh_file(path):
         pts = np.column_stack([pts, np.zeros(len(pts))])
     if not np.all(np.isfinite(pts)):
         raise MeshError("mesh has NaN or infinite coordinates")
+    if len(pts) and np.abs(pts).max() > MAX_COORD:
+        raise MeshError(f"mesh has coordinates beyond +-{MAX_COORD:g} m (largest {np.abs(pts).max():g})")
     faces = np.concatenate(tris).astype(np.int64)
     uniq, inv = np.unique(pts, axis=0, return_inverse=True)
     faces = inv.ravel()[faces]

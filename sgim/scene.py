@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .geometry import (
+    MAX_COORD,
     MeshError,
     dip_to_normal,
     facet_degeneracies,
@@ -36,6 +37,9 @@ def _short(value, limit=80):
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
+
+COORD = {"lo": -MAX_COORD, "hi": MAX_COORD, "unit": " m"}  # a coordinate (x, y or z)
+LENGTH = {"hi": MAX_COORD, "unit": " m"}  # a length (radius, thickness, size)
 
 PACKING_KINDS = ("cubic", "hexagonal", "fcc", "random")  # random: sgim/rpack.py
 EXCAVATION_RULES = ("paper", "exact")
@@ -142,14 +146,15 @@ class _Reader:
                 where = f"{key}.{k}" if key else k
                 self.err(where, tab[k], f"unknown key (allowed: {', '.join(sorted(allowed))})")
 
-    def number(self, tab, name, key, default=None, positive=False, nonneg=False, lo=None, hi=None):
+    def number(self, tab, name, key, default=None, positive=False, nonneg=False, lo=None, hi=None, unit=""):
         if name not in tab:
             if default is None:
                 self.err(key, None, "missing value")
             return float(default)
-        return self.check_number(tab[name], key, positive, nonneg, lo, hi)
+        return self.check_number(tab[name], key, positive, nonneg, lo, hi, unit)
 
-    def check_number(self, v, key, positive=False, nonneg=False, lo=None, hi=None):
+    def check_number(self, v, key, positive=False, nonneg=False, lo=None, hi=None, unit=""):
+        """`v` as a float: a finite number within the bounds (`unit`, e.g. " m", is named with a bound)."""
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.err(key, v, "must be a number")
         v = float(v)
@@ -160,12 +165,12 @@ class _Reader:
         if nonneg and v < 0:
             self.err(key, v, "must be >= 0")
         if lo is not None and v < lo:
-            self.err(key, v, f"must be >= {lo}")
+            self.err(key, v, f"must be >= {lo:g}{unit}" if unit else f"must be >= {lo}")
         if hi is not None and v > hi:
-            self.err(key, v, f"must be <= {hi}")
+            self.err(key, v, f"must be <= {hi:g}{unit}" if unit else f"must be <= {hi}")
         return v
 
-    def vector(self, tab, name, key, n=3, default=None):
+    def vector(self, tab, name, key, n=3, default=None, lo=None, hi=None, unit=""):
         if name not in tab:
             if default is None:
                 self.err(key, None, "missing value")
@@ -173,9 +178,10 @@ class _Reader:
         v = tab[name]
         if not isinstance(v, list) or len(v) != n:
             self.err(key, v, f"must be a list of {n} numbers")
-        return np.array([self.check_number(x, f"{key}[{i}]") for i, x in enumerate(v)], float)
+        return np.array([self.check_number(x, f"{key}[{i}]", lo=lo, hi=hi, unit=unit) for i, x in enumerate(v)],
+                        float)
 
-    def matrix(self, tab, name, key, ncol, integer=False):
+    def matrix(self, tab, name, key, ncol, integer=False, lo=None, hi=None, unit=""):
         v = tab[name]
         if not isinstance(v, list) or not v:
             self.err(key, v, f"must be a non-empty list of [{', '.join('abc'[:ncol])}] rows")
@@ -189,7 +195,7 @@ class _Reader:
                         self.err(f"{key}[{i}]", row, "indices must be integers")
                     out[i, c] = x
                 else:
-                    out[i, c] = self.check_number(x, f"{key}[{i}]")
+                    out[i, c] = self.check_number(x, f"{key}[{i}]", lo=lo, hi=hi, unit=unit)
         return out
 
     def choice(self, tab, name, key, choices, default):
@@ -252,8 +258,8 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
 
     dom = rd.table(data, "domain", "domain", required=True)
     rd.known(dom, {"min", "max"}, "domain")
-    lo = rd.vector(dom, "min", "domain.min")
-    hi = rd.vector(dom, "max", "domain.max")
+    lo = rd.vector(dom, "min", "domain.min", **COORD)
+    hi = rd.vector(dom, "max", "domain.max", **COORD)
     for a in range(3):
         if hi[a] <= lo[a]:
             rd.err(f"domain.max[{a}]", float(hi[a]), f"must exceed domain.min[{a}] = {lo[a]:g} (empty or inverted box)")
@@ -268,7 +274,7 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
     else:
         rd.known(pk, {"kind", "radius"}, "packing")
         kind = rd.choice(pk, "kind", "packing.kind", PACKING_KINDS, "cubic")
-        radius = rd.number(pk, "radius", "packing.radius", positive=True)
+        radius = rd.number(pk, "radius", "packing.radius", positive=True, **LENGTH)
         if 2 * radius > float(np.min(hi - lo)):
             rd.err("packing.radius", radius, f"spheres of diameter {2 * radius:g} do not fit in the domain")
         packing = Packing(kind, radius)
@@ -372,7 +378,7 @@ def _read_surface(rd, ex, key, domain, scene_path):
     if form == "vertices":
         if "faces" not in ex:
             rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
-        verts = rd.matrix(ex, "vertices", f"{key}.vertices", 3)
+        verts = rd.matrix(ex, "vertices", f"{key}.vertices", 3, **COORD)
         faces = rd.matrix(ex, "faces", f"{key}.faces", 3, integer=True)
         bad = np.nonzero((faces < 0) | (faces >= len(verts)))[0]
         if bad.size:
@@ -382,7 +388,7 @@ def _read_surface(rd, ex, key, domain, scene_path):
     elif form == "points":
         if "faces" in ex:
             rd.err(f"{key}.faces", ex["faces"], "faces go with vertices, not with points")
-        pts = rd.matrix(ex, "points", f"{key}.points", 3)
+        pts = rd.matrix(ex, "points", f"{key}.points", 3, **COORD)
         try:
             verts, faces = triangulate_plan(pts)
         except MeshError as exc:
@@ -418,12 +424,13 @@ def _read_disc(rd, dt, key, domain, r):
     rd.known(dt, {"name", "centre", "center", "dip", "dip_direction", "normal", "radius", "thickness"}, key)
     name = rd.string(dt, "name", f"{key}.name", key)
     cname = "centre" if "centre" in dt or "center" not in dt else "center"
-    centre = rd.vector(dt, cname, f"{key}.{cname}")
+    centre = rd.vector(dt, cname, f"{key}.{cname}", **COORD)
     has_dip = "dip" in dt or "dip_direction" in dt
     if has_dip and "normal" in dt:
         rd.err(f"{key}.normal", dt["normal"], "give either dip + dip_direction or normal, not both")
     if "normal" in dt:
         n = rd.vector(dt, "normal", f"{key}.normal")
+        n = n / max(float(np.abs(n).max()), 1e-300)  # a direction: scaled first, so that its length cannot overflow
         length = norm(n)
         if not length > 1e-12 * max(1.0, float(np.abs(n).max())):
             rd.err(f"{key}.normal", n.tolist(), "normal must not be the zero vector")
@@ -432,8 +439,8 @@ def _read_disc(rd, dt, key, domain, r):
         dip = rd.number(dt, "dip", f"{key}.dip", lo=0.0, hi=90.0)
         dd = rd.number(dt, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
         normal = dip_to_normal(dip, dd)
-    radius = rd.number(dt, "radius", f"{key}.radius", positive=True)
-    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True)
+    radius = rd.number(dt, "radius", f"{key}.radius", positive=True, **LENGTH)
+    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True, **LENGTH)
     band = max(thick / 2, 2 * r) + radius
     if np.any(centre + band < domain.min) or np.any(centre - band > domain.max):
         rd.err(f"{key}.centre", centre.tolist(), "discontinuity lies entirely outside the domain box")
@@ -494,7 +501,7 @@ def _mesh_from_table(rd, tab, key, scene_path, shape_keys, build_shape):
     if form == "vertices":
         if "faces" not in tab:
             rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
-        verts = rd.matrix(tab, "vertices", f"{key}.vertices", 3)
+        verts = rd.matrix(tab, "vertices", f"{key}.vertices", 3, **COORD)
         faces = rd.matrix(tab, "faces", f"{key}.faces", 3, integer=True)
         bad = np.nonzero((faces < 0) | (faces >= len(verts)))[0]
         if bad.size:
@@ -531,7 +538,7 @@ def _read_path(rd, tab, key):
     v = tab["path"]
     if not isinstance(v, list) or len(v) < 2:
         rd.err(key, v, "must be a list of at least two [x, y, z] points")
-    return rd.matrix(tab, "path", key, 3)
+    return rd.matrix(tab, "path", key, 3, **COORD)
 
 
 def _trimesh_or_error(rd, verts, faces, face_key):
@@ -558,28 +565,28 @@ def _read_cavity(rd, ct, key, domain, scene_path):
         if shape in ("circular_tunnel", "horseshoe_tunnel"):
             path = _read_path(rd, ct, f"{key}.path")
             if shape == "circular_tunnel":
-                r = rd.number(ct, "radius", f"{key}.radius", positive=True)
+                r = rd.number(ct, "radius", f"{key}.radius", positive=True, **LENGTH)
                 v, f = shapes.circular_tunnel(path, r, seg)
                 return v, f, {"path": path.tolist(), "radius": r, "segments": seg}
-            w = rd.number(ct, "width", f"{key}.width", positive=True)
-            h = rd.number(ct, "height", f"{key}.height", positive=True)
+            w = rd.number(ct, "width", f"{key}.width", positive=True, **LENGTH)
+            h = rd.number(ct, "height", f"{key}.height", positive=True, **LENGTH)
             v, f = shapes.horseshoe_tunnel(path, w, h, seg)
             return v, f, {"path": path.tolist(), "width": w, "height": h, "segments": seg}
         if shape == "ellipsoid":
             cname = "centre" if "centre" in ct or "center" not in ct else "center"
-            c = rd.vector(ct, cname, f"{key}.{cname}")
+            c = rd.vector(ct, cname, f"{key}.{cname}", **COORD)
             if "radii" in ct and "radius" in ct:
                 rd.err(f"{key}.radius", ct["radius"], "give either radius (a sphere) or radii, not both")
             if "radius" in ct:
-                radii = np.full(3, rd.number(ct, "radius", f"{key}.radius", positive=True))
+                radii = np.full(3, rd.number(ct, "radius", f"{key}.radius", positive=True, **LENGTH))
             else:
-                radii = rd.vector(ct, "radii", f"{key}.radii")
+                radii = rd.vector(ct, "radii", f"{key}.radii", **LENGTH)
                 for a in range(3):
                     rd.check_number(float(radii[a]), f"{key}.radii[{a}]", positive=True)
             v, f = shapes.ellipsoid(c, radii, seg)
             return v, f, {"centre": c.tolist(), "radii": radii.tolist(), "segments": seg}
-        lo = rd.vector(ct, "min", f"{key}.min")
-        hi = rd.vector(ct, "max", f"{key}.max")
+        lo = rd.vector(ct, "min", f"{key}.min", **COORD)
+        hi = rd.vector(ct, "max", f"{key}.max", **COORD)
         for a in range(3):
             if hi[a] <= lo[a]:
                 rd.err(f"{key}.max[{a}]", float(hi[a]), f"must exceed {key}.min[{a}] = {lo[a]:g}")
@@ -606,10 +613,10 @@ def _read_surface_discontinuity(rd, dt, key, domain, r, scene_path):
     allowed = {"name", "thickness", "faces", *SURFACE_FORMS, *set().union(*_SURFACE_SHAPE_KEYS.values())}
     rd.known(dt, allowed, key)
     name = rd.string(dt, "name", f"{key}.name", key)
-    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True)
+    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True, **LENGTH)
 
     def build(shape):
-        trace = rd.vector(dt, "trace", f"{key}.trace")
+        trace = rd.vector(dt, "trace", f"{key}.trace", **COORD)
         p = {"trace": trace.tolist()}
         p["dip_direction"] = rd.number(dt, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
         for k in ("dip_top", "dip_bottom"):
@@ -617,7 +624,7 @@ def _read_surface_discontinuity(rd, dt, key, domain, r, scene_path):
             if p[k] <= 0:
                 rd.err(f"{key}.{k}", p[k], "must be > 0 (a listric fault dips)")
         for k in ("depth", "length", "resolution"):
-            p[k] = rd.number(dt, k, f"{key}.{k}", positive=True)
+            p[k] = rd.number(dt, k, f"{key}.{k}", positive=True, **LENGTH)
         v, f = shapes.listric(trace, p["dip_direction"], p["dip_top"], p["dip_bottom"], p["depth"], p["length"],
                               p["resolution"])
         return v, f, p
