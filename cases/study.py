@@ -63,6 +63,7 @@ AXIS_KINDS = ("grid", "list", "realisations")
 SAMPLED_KINDS = ("uniform", "normal", "fisher")
 PARAM_KINDS = AXIS_KINDS + SAMPLED_KINDS
 MAX_CASES = 1_000_000  # cases per study: each is a row of the table and usually an engine run
+MAX_TIMEOUT = 1e9  # s per case (30 years): a deadline beyond the platform's time_t overflowed the runner
 
 
 # --------------------------------------------------------------------------------------------- evaluators
@@ -339,8 +340,8 @@ def load_study(path, check_engine=True) -> Study:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         err("seed", seed, "must be an integer >= 0")
     timeout = data.get("timeout")
-    if timeout is not None and (not _is_number(timeout) or not math.isfinite(timeout) or timeout <= 0):
-        err("timeout", timeout, "must be a number of seconds > 0")
+    if timeout is not None and (not _is_number(timeout) or not 0 < timeout <= MAX_TIMEOUT):
+        err("timeout", timeout, f"must be a number of seconds in (0, {MAX_TIMEOUT:g}]")
 
     ptab = data.get("parameters", {})
     if not isinstance(ptab, dict):
@@ -616,8 +617,8 @@ def cmd_run(args):
     say = _progress(args.quiet or rank != 0)
     try:
         study = load_study(args.study)
-        if args.timeout is not None and not args.timeout > 0:
-            raise CliError(f"--timeout: {args.timeout!r}: must be > 0 seconds")
+        if args.timeout is not None and not 0 < args.timeout <= MAX_TIMEOUT:
+            raise CliError(f"--timeout: {args.timeout!r}: must be in (0, {MAX_TIMEOUT:g}] seconds")
     except (SceneError, CliError) as exc:
         if comm is None:
             raise

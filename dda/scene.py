@@ -53,7 +53,8 @@ from pathlib import Path
 import numpy as np
 
 from sgim.portable import matmul
-from sgim.scene import COORD, LENGTH, MAX_COORD, SceneError, _Reader
+from sgim.geometry import MIN_LENGTH
+from sgim.scene import COORD, MAX_COORD, SIZE, SceneError, _Reader
 
 from .simulation import ContactLaw
 
@@ -67,10 +68,12 @@ SPHERE_KEYS |= {"load"}  # [[spheres.load]]: loaded regions (constant force or p
 SPHERE_LOAD_KEYS = {"region", "below", "force", "velocity"}
 LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
 # Numerical guards far beyond any rock or engine setting (the resource limits refuse the long runs that stiff or
-# light settings ask for, dda/limits.py): above these the critical time step, masses and energies overflow.
-STIFFNESS = {"hi": 1e40, "unit": " N/m"}  # contact and bond stiffness
-MODULUS = {"hi": 1e40, "unit": " Pa"}  # Young's modulus of blocks and bonds
-DENSITY = {"hi": 1e40, "unit": " kg/m3"}
+# light settings ask for, dda/limits.py): beyond these the critical time step, masses and energies over- or
+# underflow.
+STIFFNESS = {"lo": 1e-20, "hi": 1e40, "unit": " N/m"}  # contact and bond stiffness
+MODULUS = {"lo": 1e-20, "hi": 1e40, "unit": " Pa"}  # Young's modulus of blocks and bonds
+DENSITY = {"lo": 1e-20, "hi": 1e40, "unit": " kg/m3"}
+DURATION = {"hi": 1e12, "unit": " s"}  # 30 000 years: steps = duration / dt stay finite
 RATIO = {"hi": 1e3, "unit": ""}  # dimensionless factors (bond shear / normal stiffness, bond radius)
 
 
@@ -326,7 +329,8 @@ def _read_spheres(rd, data, path):
     law = BondLaw(
         young=rd.number(st, "bond_young", "spheres.bond_young", default=1e9, positive=True, **MODULUS),
         kn=rd.number(st, "bond_kn", "spheres.bond_kn", positive=True, **STIFFNESS) if "bond_kn" in st else None,
-        ks=rd.number(st, "bond_ks", "spheres.bond_ks", nonneg=True, **STIFFNESS) if "bond_ks" in st else None,
+        ks=rd.number(st, "bond_ks", "spheres.bond_ks", nonneg=True, hi=STIFFNESS["hi"], unit=STIFFNESS["unit"])
+        if "bond_ks" in st else None,
         shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio", default=0.4, nonneg=True,
                               **RATIO),
         tensile=rd.number(st, "bond_tensile", "spheres.bond_tensile", default=inf, nonneg=True),
@@ -374,6 +378,10 @@ def _read_spheres(rd, data, path):
     return out
 
 
+GENERATOR_SIZES = {"size", "height", "b", "h", "depth", "base_length", "base_thickness", "brick", "projectile",
+                   "spacing", "side", "clearance", "gap", "run", "margin"}  # [[generate]] lengths [m]
+
+
 def _generator_types(rd, fn, params, key):
     """A [[generate]] parameter whose default is a number, a string, a flag or a list of numbers must be given as
     one (the generators would convert "13" to 13 without a word)."""
@@ -412,6 +420,8 @@ def _generator_numbers(rd, value, key, seed=False):
         if not seed and abs(value) > MAX_COORD:
             rd.err(key, value, f"must be within +-{MAX_COORD:g} (lengths and coordinates in m, angles in degrees, "
                                "counts)")
+        if key.split(".")[-1].split("[")[0] in GENERATOR_SIZES and 0 < abs(value) < MIN_LENGTH:
+            rd.err(key, value, f"must be 0 or at least {MIN_LENGTH:g} m (a size)")
 
 
 def _law(rd, tab, key, base=None):
@@ -466,7 +476,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
             sleep[k] = rd.number(st, k, f"simulation.{k}", positive=True)
     if "sleep_steps" in st:
         sleep["sleep_steps"] = int(rd.number(st, "sleep_steps", "simulation.sleep_steps", lo=1, hi=1e9))
-    duration = rd.number(st, "duration", "simulation.duration", positive=True)
+    duration = rd.number(st, "duration", "simulation.duration", positive=True, **DURATION)
     dt = rd.number(st, "dt", "simulation.dt", default=0.0, nonneg=True) or None
     safety = rd.number(st, "safety", "simulation.safety", default=0.5, positive=True, hi=1.0)
     gravity = rd.vector(st, "gravity", "simulation.gravity", default=(0.0, 0.0, -9.81))
@@ -629,12 +639,12 @@ def _read_block(rd, bt, key, scene_path):
         from .shapes import SHAPES, GeometryError, rotation_about, shape
 
         sname = rd.choice(bt, "shape", f"{key}.shape", SHAPES, None)
-        size = rd.number(bt, "size", f"{key}.size", positive=True, **LENGTH)
+        size = rd.number(bt, "size", f"{key}.size", positive=True, **SIZE)
         centre = rd.vector(bt, "center", f"{key}.center", default=(0.0, 0.0, 0.0), **COORD)
         kw = {}
         for extra in ("width", "height"):
             if extra in bt:
-                kw[extra] = rd.number(bt, extra, f"{key}.{extra}", positive=True, **LENGTH)
+                kw[extra] = rd.number(bt, extra, f"{key}.{extra}", positive=True, **SIZE)
         if "sides" in bt:
             kw["sides"] = int(rd.number(bt, "sides", f"{key}.sides", lo=3, hi=64))
         rotation = None

@@ -263,8 +263,13 @@ def _check_args(args):
                                     ("--penetration", args.penetration, 0, 1, "")):
         if not (math.isfinite(val) and lo < val < hi):
             raise WedgeInputError(f"{name} = {val!r}: must be in ({lo:g}, {hi:g}){unit}")
-    if args.kn is not None and not (math.isfinite(args.kn) and 0 < args.kn <= 1e40):
-        raise WedgeInputError(f"--kn = {args.kn!r}: must be in (0, 1e+40] N/m")
+    # lower bounds: a smaller wedge underflows its geometry, a finer search never ends, a softer contact blows up
+    for name, val, least, unit in (("--height", args.height, 1e-9, " m"), ("--tolerance", args.tolerance, 1e-3, ""),
+                                   ("--step", args.step, 0.1, ""), ("--penetration", args.penetration, 1e-12, "")):
+        if val < least:
+            raise WedgeInputError(f"{name} = {val!r}: must be at least {least:g}{unit}")
+    if args.kn is not None and not (math.isfinite(args.kn) and 1e-20 <= args.kn <= 1e40):
+        raise WedgeInputError(f"--kn = {args.kn!r}: must be in [1e-20, 1e+40] N/m")
     m = getattr(args, "max_steps", None)
     if m is not None and not (m >= 1 and m < 2 ** 63 and m == int(m)):
         raise WedgeInputError(f"--max-steps = {m!r}: must be a positive integer")

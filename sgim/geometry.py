@@ -17,6 +17,9 @@ from .portable import norm, sin_cos_deg
 # Coordinates and lengths in scenes and meshes lie within +-MAX_COORD metres: a million kilometres is beyond any
 # model, and squares and products of such numbers stay far from overflow (1e308).
 MAX_COORD = 1e9
+# Sizes (radii, widths, depths, ...) are at least MIN_LENGTH metres: a nanometre; smaller ones underflow areas and
+# volumes, and a lattice of them would count more sites per axis than an int64 holds.
+MIN_LENGTH = 1e-9
 
 
 class MeshError(ValueError):

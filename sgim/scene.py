@@ -15,6 +15,7 @@ import numpy as np
 
 from .geometry import (
     MAX_COORD,
+    MIN_LENGTH,
     MeshError,
     dip_to_normal,
     facet_degeneracies,
@@ -39,7 +40,8 @@ def _short(value, limit=80):
 
 
 COORD = {"lo": -MAX_COORD, "hi": MAX_COORD, "unit": " m"}  # a coordinate (x, y or z)
-LENGTH = {"hi": MAX_COORD, "unit": " m"}  # a length (radius, thickness, size)
+LENGTH = {"hi": MAX_COORD, "unit": " m"}  # a length that may be 0 (thickness)
+SIZE = {"lo": MIN_LENGTH, "hi": MAX_COORD, "unit": " m"}  # a length > 0 (radius, width, depth, ...)
 
 PACKING_KINDS = ("cubic", "hexagonal", "fcc", "random")  # random: sgim/rpack.py
 EXCAVATION_RULES = ("paper", "exact")
@@ -274,7 +276,7 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
     else:
         rd.known(pk, {"kind", "radius"}, "packing")
         kind = rd.choice(pk, "kind", "packing.kind", PACKING_KINDS, "cubic")
-        radius = rd.number(pk, "radius", "packing.radius", positive=True, **LENGTH)
+        radius = rd.number(pk, "radius", "packing.radius", positive=True, **SIZE)
         if 2 * radius > float(np.min(hi - lo)):
             rd.err("packing.radius", radius, f"spheres of diameter {2 * radius:g} do not fit in the domain")
         packing = Packing(kind, radius)
@@ -439,7 +441,7 @@ def _read_disc(rd, dt, key, domain, r):
         dip = rd.number(dt, "dip", f"{key}.dip", lo=0.0, hi=90.0)
         dd = rd.number(dt, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
         normal = dip_to_normal(dip, dd)
-    radius = rd.number(dt, "radius", f"{key}.radius", positive=True, **LENGTH)
+    radius = rd.number(dt, "radius", f"{key}.radius", positive=True, **SIZE)
     thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True, **LENGTH)
     band = max(thick / 2, 2 * r) + radius
     if np.any(centre + band < domain.min) or np.any(centre - band > domain.max):
@@ -565,11 +567,11 @@ def _read_cavity(rd, ct, key, domain, scene_path):
         if shape in ("circular_tunnel", "horseshoe_tunnel"):
             path = _read_path(rd, ct, f"{key}.path")
             if shape == "circular_tunnel":
-                r = rd.number(ct, "radius", f"{key}.radius", positive=True, **LENGTH)
+                r = rd.number(ct, "radius", f"{key}.radius", positive=True, **SIZE)
                 v, f = shapes.circular_tunnel(path, r, seg)
                 return v, f, {"path": path.tolist(), "radius": r, "segments": seg}
-            w = rd.number(ct, "width", f"{key}.width", positive=True, **LENGTH)
-            h = rd.number(ct, "height", f"{key}.height", positive=True, **LENGTH)
+            w = rd.number(ct, "width", f"{key}.width", positive=True, **SIZE)
+            h = rd.number(ct, "height", f"{key}.height", positive=True, **SIZE)
             v, f = shapes.horseshoe_tunnel(path, w, h, seg)
             return v, f, {"path": path.tolist(), "width": w, "height": h, "segments": seg}
         if shape == "ellipsoid":
@@ -578,11 +580,11 @@ def _read_cavity(rd, ct, key, domain, scene_path):
             if "radii" in ct and "radius" in ct:
                 rd.err(f"{key}.radius", ct["radius"], "give either radius (a sphere) or radii, not both")
             if "radius" in ct:
-                radii = np.full(3, rd.number(ct, "radius", f"{key}.radius", positive=True, **LENGTH))
+                radii = np.full(3, rd.number(ct, "radius", f"{key}.radius", positive=True, **SIZE))
             else:
                 radii = rd.vector(ct, "radii", f"{key}.radii", **LENGTH)
                 for a in range(3):
-                    rd.check_number(float(radii[a]), f"{key}.radii[{a}]", positive=True)
+                    rd.check_number(float(radii[a]), f"{key}.radii[{a}]", positive=True, **SIZE)
             v, f = shapes.ellipsoid(c, radii, seg)
             return v, f, {"centre": c.tolist(), "radii": radii.tolist(), "segments": seg}
         lo = rd.vector(ct, "min", f"{key}.min", **COORD)
@@ -621,10 +623,11 @@ def _read_surface_discontinuity(rd, dt, key, domain, r, scene_path):
         p["dip_direction"] = rd.number(dt, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
         for k in ("dip_top", "dip_bottom"):
             p[k] = rd.number(dt, k, f"{key}.{k}", lo=0.0, hi=90.0)
-            if p[k] <= 0:
-                rd.err(f"{key}.{k}", p[k], "must be > 0 (a listric fault dips)")
+            if p[k] < 0.1:
+                rd.err(f"{key}.{k}", p[k], "must be >= 0.1 degrees (a listric fault dips; flatter, its horizontal "
+                                           "offset runs off to infinity)")
         for k in ("depth", "length", "resolution"):
-            p[k] = rd.number(dt, k, f"{key}.{k}", positive=True, **LENGTH)
+            p[k] = rd.number(dt, k, f"{key}.{k}", positive=True, **SIZE)
         v, f = shapes.listric(trace, p["dip_direction"], p["dip_top"], p["dip_bottom"], p["depth"], p["length"],
                               p["resolution"])
         return v, f, p
