@@ -80,14 +80,16 @@ def read_grading(rd, gt, key):
     if not isinstance(near, list) or not near or not all(isinstance(x, str) for x in near):
         rd.err(f"{key}.near", near, "must be a non-empty list of names of excavation surfaces, cavities or "
                                     "discontinuities")
-    rf = rd.number(gt, "fine_radius", f"{key}.fine_radius", positive=True)
-    rc = rd.number(gt, "coarse_radius", f"{key}.coarse_radius", positive=True)
+    from .scene import LENGTH, SIZE
+
+    rf = rd.number(gt, "fine_radius", f"{key}.fine_radius", positive=True, **SIZE)
+    rc = rd.number(gt, "coarse_radius", f"{key}.coarse_radius", positive=True, **SIZE)
     if rc < rf:
         rd.err(f"{key}.coarse_radius", rc, f"must be >= fine_radius = {rf:g}")
     if rc > 64 * rf:
         rd.err(f"{key}.coarse_radius", rc, f"at most 64 x fine_radius = {64 * rf:g}")
-    df = rd.number(gt, "fine_distance", f"{key}.fine_distance", default=0.0, nonneg=True)
-    dc = rd.number(gt, "coarse_distance", f"{key}.coarse_distance", positive=True)
+    df = rd.number(gt, "fine_distance", f"{key}.fine_distance", default=0.0, nonneg=True, **LENGTH)
+    dc = rd.number(gt, "coarse_distance", f"{key}.coarse_distance", positive=True, **LENGTH)
     if dc <= df:
         rd.err(f"{key}.coarse_distance", dc, f"must exceed fine_distance = {df:g}")
     spread = rd.number(gt, "spread", f"{key}.spread", default=0.0, nonneg=True, hi=0.5)

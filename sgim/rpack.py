@@ -74,6 +74,7 @@ from . import _excavate as EX
 from . import _rpack as K
 from .grading import Grading, NearObjects, empty_mesh_data, read_grading, scene_names
 from .portable import norm
+from .scene import SIZE
 
 LAWS = ("uniform", "lognormal", "sieve")
 POOL = 32  # pooled radii (a law): each pocket takes the largest that fits
@@ -204,7 +205,7 @@ def read_random(rd, pk, domain, scene_path):
                                       "[packing.grading]")
     spec = RandomSpec(seed=int(seed), overlap=overlap)
     if forms[0] == "radius":
-        r = rd.number(pk, "radius", "packing.radius", positive=True)
+        r = rd.number(pk, "radius", "packing.radius", positive=True, **SIZE)
         spec.law = RadiusLaw("constant", {"radius": r})
     elif forms[0] == "distribution":
         spec.law = _read_law(rd, rd.table(pk, "distribution", "packing.distribution"))
@@ -242,21 +243,21 @@ def _read_law(rd, dt):
     law = rd.choice(dt, "law", f"{key}.law", LAWS, None)
     if law == "uniform":
         rd.known(dt, {"law", "min", "max"}, key)
-        lo = rd.number(dt, "min", f"{key}.min", positive=True)
-        hi = rd.number(dt, "max", f"{key}.max", positive=True)
+        lo = rd.number(dt, "min", f"{key}.min", positive=True, **SIZE)
+        hi = rd.number(dt, "max", f"{key}.max", positive=True, **SIZE)
         if hi < lo:
             rd.err(f"{key}.max", hi, f"must be >= min = {lo:g}")
         _ratio(rd, f"{key}.max", hi, lo)
         return RadiusLaw("uniform", {"min": lo, "max": hi})
     if law == "lognormal":
         rd.known(dt, {"law", "median", "sigma", "min", "max"}, key)
-        med = rd.number(dt, "median", f"{key}.median", positive=True)
+        med = rd.number(dt, "median", f"{key}.median", positive=True, **SIZE)
         sg = rd.number(dt, "sigma", f"{key}.sigma", positive=True, hi=2.0)
         p = {"median": med, "sigma": sg}
         if "min" in dt:
-            p["min"] = rd.number(dt, "min", f"{key}.min", positive=True)
+            p["min"] = rd.number(dt, "min", f"{key}.min", positive=True, **SIZE)
         if "max" in dt:
-            p["max"] = rd.number(dt, "max", f"{key}.max", positive=True)
+            p["max"] = rd.number(dt, "max", f"{key}.max", positive=True, **SIZE)
         if "min" in p and "max" in p and p["max"] <= p["min"]:
             rd.err(f"{key}.max", p["max"], f"must exceed min = {p['min']:g}")
         lo = p.get("min", med * math.exp(-6 * sg))
@@ -270,7 +271,7 @@ def _read_law(rd, dt):
         v = dt.get(name)
         if not isinstance(v, list) or len(v) < 2:
             rd.err(f"{key}.{name}", v, "must be a list of at least two numbers")
-    sizes = [rd.check_number(x, f"{key}.sizes[{i}]", positive=True) for i, x in enumerate(dt["sizes"])]
+    sizes = [rd.check_number(x, f"{key}.sizes[{i}]", positive=True, **SIZE) for i, x in enumerate(dt["sizes"])]
     passing = [rd.check_number(x, f"{key}.passing[{i}]", lo=0.0, hi=100.0) for i, x in enumerate(dt["passing"])]
     if len(sizes) != len(passing):
         rd.err(f"{key}.passing", dt["passing"], f"needs one value per size ({len(sizes)})")

@@ -210,6 +210,7 @@ RULES = [
     (r"^packing\.seed$", (M, F, F)),
     (r"^packing\.distribution\.sizes\.\d+$", (F, F, F)),
     (r"^packing\.distribution\.passing\.\d+$", (M, F, F)),
+    (r"^packing\.distribution\.(min|max|median|sigma)$", (F, F, F)),
     (r"^packing\.grading\.(fine|coarse)_radius$", (F, F, F)),
     (r"^packing\.grading\.(fine|coarse)_distance$", (M, F, M)),
     (r"^bonds\.tolerance$", (M, F, F)),
@@ -373,7 +374,7 @@ class Generator:
             return "adapters export" if self.rng.random() < 0.12 and name not in NOT_RUN else "sgim build"
         return "adapters export" if self.rng.random() < 0.12 and name not in NOT_RUN else "dda run"
 
-    def scene_case(self, kind, name, rel, doc, desc, expect, files=None, shrunk=""):
+    def scene_case(self, kind, name, rel, doc, desc, expect, files=None, shrunk="", cheap=True):
         files = dict(files or {})
         command = self.scene_command(kind, doc, name)
         fname = "study.toml" if kind == "study" else "scene.toml"
@@ -391,7 +392,7 @@ class Generator:
             to = "yade" if kind == "dda" and isinstance(doc, dict) and "spheres" not in doc else "vtu"
             args = [src, "--to", to, "-o", "{d}/out", "--quiet"]
         reader = ("study" if kind == "study" else kind, fname)
-        cheap = kind != "study" and name not in NOT_RUN
+        cheap = cheap and kind != "study" and name not in NOT_RUN
         self.add(command, args, expect, f"{rel}{shrunk}: {desc}", files=files, reader=reader, cheap=cheap,
                  owner="scene readers")
 
@@ -411,7 +412,7 @@ class Generator:
             self.scene_values(kind, p.name, rel, doc0, base_files, shrunk)
             self.scene_structure(kind, p.name, rel, doc0, base_files, shrunk, p.read_text(encoding="utf-8"))
 
-    def scene_values(self, kind, name, rel, doc0, files, shrunk):
+    def scene_values(self, kind, name, rel, doc0, files, shrunk, cheap=True):
         groups = {}
         for path, v in _walk_numbers(doc0):
             groups.setdefault(_pattern(path), []).append((path, v))
@@ -422,7 +423,7 @@ class Generator:
                 new = mutated_value(orig, vc)
                 _set(doc, path, new)
                 self.scene_case(kind, name, rel, doc, f"{_dotted(path)} = {orig!r} -> {new!r}",
-                                classify(path, vc), files, shrunk)
+                                classify(path, vc), files, shrunk, cheap=cheap)
 
     def scene_structure(self, kind, name, rel, doc0, files, shrunk, text):
         rng = self.rng
@@ -514,6 +515,24 @@ class Generator:
         head = "\n".join(lines).encode()[: max(1, len(text) // 3)]
         bad = rng.choice([b"\xff\xfe\x00\x00garbage", head + b"\x00\x9c"])
         self.scene_case(kind, name, rel, bad, f"binary bytes ({len(bad)} bytes: {bad[:24]!r}...)", F, files, shrunk)
+
+    def random_packings(self):
+        """Random packings in small scenes of their own (the ones in cases/ use only some of the radius laws)."""
+        head = ('name = "random"\n[domain]\nmin = [0.0, 0.0, 0.0]\nmax = [2.0, 2.0, 2.0]\n[output]\nformats = ["npz"]\n'
+                '[[excavation]]\nname = "top"\npoints = [[-1.0, -1.0, 1.8], [3.0, -1.0, 1.7], [3.0, 3.0, 1.9], '
+                '[-1.0, 3.0, 1.8]]\n[packing]\nkind = "random"\nseed = 1\n')
+        for what, body in (
+            ("constant radius", "radius = 0.15\n"),
+            ("uniform law", '[packing.distribution]\nlaw = "uniform"\nmin = 0.1\nmax = 0.2\n'),
+            ("lognormal law", '[packing.distribution]\nlaw = "lognormal"\nmedian = 0.15\nsigma = 0.2\nmin = 0.1\n'
+                              'max = 0.3\n'),
+            ("sieve curve", '[packing.distribution]\nlaw = "sieve"\nsizes = [0.2, 0.3, 0.4]\n'
+                            'passing = [0.0, 50.0, 100.0]\n'),
+            ("grading", '[packing.grading]\nnear = ["top"]\nfine_radius = 0.1\ncoarse_radius = 0.3\n'
+                        'fine_distance = 0.1\ncoarse_distance = 0.8\n'),
+        ):
+            doc0 = tomllib.loads(head + body)
+            self.scene_values("sgim", "random packing", f"random packing ({what})", doc0, {}, "", cheap=False)
 
     # -- meshes --------------------------------------------------------------------------------------------
     def meshes(self):
@@ -1286,6 +1305,7 @@ def valid_files(tmp_path_factory):
 def generate(valid_files, seed=SEED):
     g = Generator(seed, valid_files)
     g.scenes()
+    g.random_packings()
     g.noop_study()
     g.meshes()
     g.corrupt_files()
