@@ -86,7 +86,7 @@ import numpy as np
 
 from . import _dfn as K
 from .geometry import MAX_COORD, dip_to_normal
-from .portable import norm
+from .portable import each, each2, norm
 from .scene import SceneError
 
 CHUNK = 4096  # candidates per block; part of the reproducibility contract, never change
@@ -191,13 +191,13 @@ class RadiusLaw:
             e = 1.0 - b
             X = self.max / self.min
             if math.isinf(X):  # e < 0
-                x = (1.0 - u) ** (1.0 / e)
+                x = each2(math.pow, 1.0 - u, 1.0 / e)
             else:
                 lx = math.log(X)
                 if abs(e) * lx < 1e-12:
-                    x = np.exp(u * lx)
+                    x = each(math.exp, u * lx)
                 else:
-                    x = np.exp(np.log1p(u * math.expm1(e * lx)) / e)
+                    x = each(math.exp, each(math.log1p, u * math.expm1(e * lx)) / e)
             r = self.min * x
         elif self.law == "exponential":
             m, M = self.min / self.mean, self.max / self.mean
@@ -213,7 +213,7 @@ class RadiusLaw:
             else:
                 pa, pb = float(ndtr(a)), float(ndtr(b))
                 z = ndtri(pa + u * (pb - pa))
-            r = np.exp(muj + self.sigma * z)
+            r = each(math.exp, muj + self.sigma * z)
         return np.clip(r, self.min, self.max)
 
     def sample_biased(self, u, extent):
@@ -492,12 +492,12 @@ def fisher_normals(pole, kappa, u):
     """Unit vectors from the Fisher distribution about ``pole``; u is (n, 2) uniforms in [0, 1)."""
     e = math.exp(-2.0 * kappa)
     up = 1.0 - u[:, 0]  # in (0, 1]
-    t = np.minimum(-np.log(e + up * (-math.expm1(-2.0 * kappa))) / kappa, 2.0)  # 1 - cos(theta)
+    t = np.minimum(-each(math.log, e + up * (-math.expm1(-2.0 * kappa))) / kappa, 2.0)  # 1 - cos(theta)
     st = np.sqrt(t * (2.0 - t))
     phi = 2.0 * math.pi * u[:, 1]
     p = np.asarray(pole, float) / norm(pole)
     ux, uy, uz, vx, vy, vz = K.plane_basis(p)
-    a, b, w = st * np.cos(phi), st * np.sin(phi), 1.0 - t
+    a, b, w = st * each(math.cos, phi), st * each(math.sin, phi), 1.0 - t
     return np.column_stack([a * ux + b * vx + w * p[0], a * uy + b * vy + w * p[1], a * uz + b * vz + w * p[2]])
 
 
