@@ -10,7 +10,8 @@ an edge of A with an edge of B seen along n. A point of A's surface (vertex or e
 of B behind it along -n (the line through it is clipped against B); a vertex of B the depth of A beyond it
 along n. The contact point is the middle of that overlap segment. Where the other block is thin (its part of
 the line ends before it reaches the point, a corner of it sunk into this block), the point still bears when that
-part lies inside the point's own block: the surfaces overlap along the line by the same depth (``_reaches``). A block resting on a face thus gets the corners
+part lies inside the point's own block: the surfaces overlap along the line by the same depth (``_reaches``).
+A block resting on a face thus gets the corners
 of the clipped contact polygon (4 for a block on a larger face), an edge on a face its two clipped ends, an
 edge across an edge their crossing, a vertex on a face the vertex.
 
