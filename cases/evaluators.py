@@ -77,10 +77,18 @@ NAN = float("nan")
 
 @dataclass(frozen=True)
 class Evaluator:
+    """fn(scene_path, case_dir, params) -> {name: scalar}. needs: external programs; results: the scalars fn
+    returns; units: {result: unit} for reports; check(scene_path): validates a scene before any case runs
+    (raises with a one-line reason); warm(scene_path): one-off work (kernel compilation) done once in the case
+    server of each rank before the cases are forked from it."""
+
     fn: Callable
     needs: tuple = ()
     description: str = ""
     results: tuple = field(default=())  # the scalars fn returns (every case returns all of them)
+    units: dict = field(default_factory=dict)
+    check: Callable | None = None
+    warm: Callable | None = None
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -180,6 +188,22 @@ def _wedge_model_kw(w):
     return kw
 
 
+def warm_wedge_dda(scene_path):
+    """Compile the DDA kernels on a few steps of the scene's wedge (outside the timed search)."""
+    from dda import hoekbray
+    from dda.wedge import WedgeModel
+
+    w = wedge_inputs(scene_path)
+    geo = (w["joint_a"], w["joint_b"], w["face"], w["top"], w["height"])
+    try:
+        hoekbray.wedge_fs(*geo[:3], top=geo[3], height=geo[4], friction=w["friction"], unit_weight=w["unit_weight"])
+    except hoekbray.WedgeError:
+        return
+    kw = _wedge_model_kw(w)
+    WedgeModel(*geo, w["density"] * G / 1000.0, **{**kw, "duration": 0.002, "settle": 0.002}).run(w["friction"])
+    _WARM.add("wedge-dda")
+
+
 def wedge_dda(scene_path, case_dir, params):
     """DDA critical friction and factor of safety of the scene's wedge next to Hoek & Bray's."""
     from dda import hoekbray
@@ -200,10 +224,7 @@ def wedge_dda(scene_path, case_dir, params):
     unit_kn = w["density"] * G / 1000.0  # WedgeModel takes kN/m^3
     kw = _wedge_model_kw(w)
     if "wedge-dda" not in _WARM:  # compile the kernels outside the timed search (results do not change)
-        warm = WedgeModel(geo["joint_a"], geo["joint_b"], geo["face"], geo["top"], geo["height"], unit_kn,
-                          **{**kw, "duration": 0.002, "settle": 0.002})
-        warm.run(w["friction"])
-        _WARM.add("wedge-dda")
+        warm_wedge_dda(scene_path)
     r = dda_critical_friction(geo["joint_a"], geo["joint_b"], geo["face"], geo["top"], geo["height"],
                               w["friction"], unit_kn, tol=0.05, step=2.0, **kw)
     if case_dir is not None:
@@ -308,6 +329,26 @@ def volume_below_surface(vertices, faces, lo, hi):
 SGIM_VOLUME_RESULTS = ("spheres", "kept_volume", "exact_volume", "error_volume", "excavate_s")
 
 
+def _warm_volume(scene):
+    from sgim.excavate import FacetSet, kept_sites
+    from sgim.packing import make_lattice
+
+    lo = scene.domain.min
+    r0 = float(np.max(scene.domain.max - lo)) / 8
+    kept_sites(make_lattice(scene.packing.kind, lo, scene.domain.max, r0), FacetSet(scene.excavations), lo,
+               scene.domain.max)
+    _WARM.add("sgim-volume")
+
+
+def warm_sgim_volume(scene_path):
+    """Compile the excavation kernels on a coarse lattice of the scene."""
+    from sgim.scene import load_scene
+
+    scene = load_scene(scene_path)
+    if scene.packing.kind != "random" and len(scene.excavations) == 1:
+        _warm_volume(scene)
+
+
 def sgim_volume(scene_path, case_dir, params):
     """Excavation volume: the lattice sites an sgim scene keeps below its one excavation surface (a height
     surface over the whole domain plan), each standing for its share of the domain volume (domain volume /
@@ -329,13 +370,7 @@ def sgim_volume(scene_path, case_dir, params):
     except ValueError as exc:
         raise SceneError(scene_path, "excavation[0]", surf.name, str(exc)) from None
     if "sgim-volume" not in _WARM:  # compile the kernels outside the timed part
-        lo = scene.domain.min
-        from sgim.packing import make_lattice
-
-        r0 = float(np.max(scene.domain.max - lo)) / 8
-        kept_sites(make_lattice(scene.packing.kind, lo, scene.domain.max, r0), FacetSet(scene.excavations), lo,
-                   scene.domain.max)
-        _WARM.add("sgim-volume")
+        _warm_volume(scene)
     t0 = time.perf_counter()
     lat = lattice_for(scene)
     kept = kept_sites(lat, FacetSet(scene.excavations), scene.domain.min, scene.domain.max)
@@ -416,6 +451,21 @@ def _reference(scene, sim, i):
     return None, None
 
 
+def _warm_dda(scene):
+    _, warm = scene.build()
+    warm.run(3 * warm.dt, record_every=warm.dt)
+    _WARM.add("dda-run")
+
+
+def warm_dda_run(scene_path):
+    """Compile the DDA kernels on three steps of the scene."""
+    from dda.scene import load_scene
+
+    scene = load_scene(scene_path)
+    if not scene.spheres:
+        _warm_dda(scene)
+
+
 def dda_run(scene_path, case_dir, params):
     """Run the DDA scene and measure the tracked block (see the module docstring)."""
     from dda.scene import load_scene
@@ -424,9 +474,7 @@ def dda_run(scene_path, case_dir, params):
     if scene.spheres:
         raise ValueError("dda-run runs block scenes; a scene with [spheres] goes to yade / liggghts or `dda run`")
     if "dda-run" not in _WARM:  # compile the kernels outside the timed run (a few steps of the same model)
-        _, warm = scene.build()
-        warm.run(3 * warm.dt, record_every=warm.dt)
-        _WARM.add("dda-run")
+        _warm_dda(scene)
     bs, sim = scene.build()
     names = list(sim.A.names)
     i = _track(names, sim.A.fixed, params.get("track") if isinstance(params.get("track"), str) else None)
@@ -503,24 +551,187 @@ def dda_spheres(scene_path, case_dir, params):
     return _sphere_results(sr, res)
 
 
+def check_dda_scene(scene_path):
+    """A DDA scene (dda.scene.load_scene) with no [spheres]: the base of dda-run studies."""
+    from dda.scene import load_scene
+
+    if load_scene(scene_path).spheres:
+        raise ValueError("a scene with [spheres]: dda-run runs block scenes (use dda-spheres, yade or liggghts)")
+
+
+def check_wedge_scene(scene_path):
+    """A DDA scene with a [[generate]] wedge (wedge-hb, wedge-dda)."""
+    from dda.scene import load_scene
+
+    load_scene(scene_path)
+    wedge_inputs(scene_path)
+
+
+def check_sgim_scene(scene_path):
+    from sgim.scene import load_scene
+
+    load_scene(scene_path)
+
+
+def check_sphere_scene(scene_path):
+    from adapters.deck import load_source
+
+    kind = load_source(scene_path)[0]
+    if kind != "spheres":
+        raise ValueError("not a sphere scene (a DDA scene with [spheres], an sgim scene or model)")
+
+
+U_WEDGE = {"fs": "-", "phi_crit": "deg", "plunge": "deg", "trend": "deg", "volume": "m^3", "wedge": "-",
+           "two_planes": "-"}
+U_WEDGE_DDA = {"fs_dda": "-", "phi_crit_dda": "deg", "fs_hb": "-", "phi_crit_hb": "deg", "error_fs": "relative",
+               "error_phi": "relative", "wedge": "-", "trials": "count", "steps_per_trial": "count", "run_s": "s"}
+U_SGIM = {"spheres": "count", "red": "count", "green": "count", "blue": "count", "red_fraction": "-",
+          "fractures": "count", "bonded": "count", "packing_density": "-", "detached_clusters": "count",
+          "detached_spheres": "count", "largest_detached": "spheres", "build_s": "s"}
+U_VOLUME = {"spheres": "count", "kept_volume": "m^3", "exact_volume": "m^3", "error_volume": "relative",
+            "excavate_s": "s"}
+U_DDA = {"displacement": "m", "moved": "blocks", "error_energy": "relative", "steps": "count", "dt": "s",
+         "dt_ratio": "-", "reference": "m", "error_disp": "relative", "run_s": "s"}
+U_DECK = {"n": "spheres", "detached": "spheres", "reference_detached": "spheres", "error_detached": "fraction",
+          "max_displacement": "m", "mean_displacement": "m", "bonds_broken": "bonds", "steps": "count",
+          "engine_s": "s"}
+
 EVALUATORS = {
     "wedge-hb": Evaluator(wedge_hb, (), "Hoek & Bray factor of safety of a wedge scene (analytical)",
-                          WEDGE_HB_RESULTS),
+                          WEDGE_HB_RESULTS, U_WEDGE, check_wedge_scene),
     "wedge-dda": Evaluator(wedge_dda, (), "DDA critical friction and factor of safety of a wedge scene, with "
-                           "Hoek & Bray in the same row", WEDGE_DDA_RESULTS),
+                           "Hoek & Bray in the same row", WEDGE_DDA_RESULTS, U_WEDGE_DDA, check_wedge_scene,
+                           warm_wedge_dda),
     "sgim-build": Evaluator(sgim_build, (), "build an sgim scene: colours, packing density, detached clusters",
-                            SGIM_RESULTS),
+                            SGIM_RESULTS, U_SGIM, check_sgim_scene),
     "sgim-volume": Evaluator(sgim_volume, (), "excavation volume: lattice sites kept below one excavation "
-                             "surface against the exact volume", SGIM_VOLUME_RESULTS),
+                             "surface against the exact volume", SGIM_VOLUME_RESULTS, U_VOLUME, check_sgim_scene,
+                             warm_sgim_volume),
     "dda-run": Evaluator(dda_run, (), "run a DDA block scene: tracked displacement, moved blocks, energy "
-                         "balance, error against the analytical reference of a standard case", DDA_RESULTS),
+                         "balance, error against the analytical reference of a standard case", DDA_RESULTS, U_DDA,
+                         check_dda_scene, warm_dda_run),
     "dda-spheres": Evaluator(dda_spheres, (), "run a sphere scene in the in-house engine (adapters.inhouse)",
-                             DECK_RESULTS),
+                             DECK_RESULTS, U_DECK, check_sphere_scene),
     "yade": Evaluator(_deck_evaluator("yade"), ("yade",), "run a sphere scene in YADE (adapters.deck)",
-                      DECK_RESULTS),
+                      DECK_RESULTS, U_DECK, check_sphere_scene),
     "liggghts": Evaluator(_deck_evaluator("liggghts"), ("liggghts",), "run a sphere scene in LIGGGHTS "
-                          "(adapters.deck)", DECK_RESULTS),
+                          "(adapters.deck)", DECK_RESULTS, U_DECK, check_sphere_scene),
 }
 
-__all__ = ["Evaluator", "EVALUATORS", "detached_clusters", "energy_error", "orientation", "wedge_inputs",
+
+# ---------------------------------------------------------------------------------------------------------
+# the registry: the framework's own evaluators, the ones above, and "module:function" of a user
+
+
+def _work(scene_path):
+    with open(scene_path, "rb") as fh:
+        return tomllib.load(fh).get("work", {})
+
+
+def _noop(scene_path, case_dir, params):
+    """Reads the scene, returns the sum of the numeric parameters (framework overhead)."""
+    _work(scene_path)
+    total = 0.0
+    for v in params.values():
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            total += v
+    return {"value": total}
+
+
+def _sleep(scene_path, case_dir, params):
+    """Sleeps [work] seconds."""
+    s = float(_work(scene_path).get("seconds", 0.1))
+    time.sleep(s)
+    return {"value": s}
+
+
+def _spin(scene_path, case_dir, params):
+    """A fixed single-core numpy workload: [work] iterations x size elementwise steps (deterministic)."""
+    w = _work(scene_path)
+    n, size = int(w.get("iterations", 200)), int(w.get("size", 100_000))
+    x = np.linspace(0.0, 1.0, size) + float(w.get("offset", 0.0))
+    for _ in range(n):
+        x = np.sin(x) * 0.999 + 0.01 * np.cos(3.0 * x)
+    return {"value": float(x.sum())}
+
+
+BUILTIN = {
+    "noop": Evaluator(_noop, (), "no work: framework overhead", ("value",), check=_work),
+    "sleep": Evaluator(_sleep, (), "sleeps [work] seconds", ("value",), {"value": "s"}, _work),
+    "spin": Evaluator(_spin, (), "fixed CPU workload ([work] iterations, size): scaling benchmark", ("value",),
+                      check=_work),
+}
+
+
+def registry():
+    """Every evaluator a study can name without a module: the framework's (noop, sleep, spin) and EVALUATORS."""
+    return {**BUILTIN, **EVALUATORS}
+
+
+def _as_evaluator(obj):
+    if isinstance(obj, Evaluator):
+        return obj
+    if callable(obj) and not hasattr(obj, "fn"):
+        return Evaluator(obj, units=dict(getattr(obj, "units", {}) or {}), check=getattr(obj, "check", None),
+                         warm=getattr(obj, "warm", None))
+    return Evaluator(obj.fn, tuple(getattr(obj, "needs", ()) or ()), getattr(obj, "description", ""),
+                     tuple(getattr(obj, "results", ()) or ()), dict(getattr(obj, "units", {}) or {}),
+                     getattr(obj, "check", None), getattr(obj, "warm", None))
+
+
+def _one_line(exc):
+    if isinstance(exc, SyntaxError):
+        where = f"{Path(exc.filename).name}:{exc.lineno}" if exc.filename else f"line {exc.lineno}"
+        return f"SyntaxError at {where}: {exc.msg}"
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def resolve_evaluator(name, study_dir=None):
+    """The Evaluator for `name`: a registry name or "module:function" (study_dir first on the import path).
+    Raises LookupError with a one-line reason for an unknown name, a module that cannot be imported (missing,
+    a syntax error, an exception while it runs) and a name that is not a function."""
+    if ":" in name:
+        import importlib
+        import sys
+
+        mod_name, _, attr = name.partition(":")
+        if not mod_name or not attr:
+            raise LookupError("must be 'module:function'")
+        if study_dir is not None and str(study_dir) not in sys.path:
+            sys.path.insert(0, str(study_dir))
+        try:
+            mod = importlib.import_module(mod_name)
+        except ImportError as exc:
+            raise LookupError(f"cannot import module {mod_name!r} ({exc})") from None
+        except BaseException as exc:  # noqa: BLE001 - a user's module: any failure is one line
+            if isinstance(exc, KeyboardInterrupt):
+                raise
+            raise LookupError(f"module {mod_name!r} fails on import: {_one_line(exc)}") from None
+        if not hasattr(mod, attr):
+            raise LookupError(f"module {mod_name!r} has no {attr!r}")
+        obj = getattr(mod, attr)
+        fn = getattr(obj, "fn", obj)
+        if not callable(fn) or isinstance(fn, type):
+            raise LookupError(f"{mod_name}.{attr} is a {type(fn).__name__}, not a function "
+                              "fn(scene_path, case_dir, params)")
+        return _as_evaluator(obj)
+    reg = registry()
+    if name not in reg:
+        raise LookupError(f"unknown evaluator (known: {', '.join(sorted(reg))}; or 'module:function')")
+    return reg[name]
+
+
+def module_file(ev):
+    """The source file of an evaluator's function (None when it has none)."""
+    import inspect
+
+    try:
+        f = inspect.getsourcefile(ev.fn)
+    except TypeError:
+        return None
+    return Path(f) if f else None
+
+
+__all__ = ["Evaluator", "EVALUATORS", "BUILTIN", "registry", "resolve_evaluator", "module_file", "detached_clusters", "energy_error", "orientation", "wedge_inputs",
            "volume_below_surface", "wedge_hb", "wedge_dda", "sgim_build", "sgim_volume", "dda_run", "dda_spheres"]
