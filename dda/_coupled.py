@@ -402,8 +402,9 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
     c_n[new] = nnew
     cur[0] = new
     if njoint > 0:
-        stats[6] = _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us,
-                           j_sgn, force, rs3)
+        # a retired joint's key is blanked: the search above finds it as a plain contact from the next step
+        stats[6], _ = _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide,
+                              j_us, j_sgn, jkey_tab, jkey_slot, force, rs3)
     res[0] = rs3[0]
     res[1] = rs3[1]
     res[2] = rs3[2]

@@ -15,8 +15,8 @@ One step (central difference exactly as the block engine, dt(0) = 0 so the first
    point of the convex polyhedron: a face, an edge or a vertex; a centre inside the wall bears on the face it
    is nearest to), both with the block engine's contact law (dda/_contact.py) at one contact point; the shear
    history of each contact is kept between steps (hash on the pair key);
-3. smooth joints (``_joints``, YADE JCFpm's smoothJoint): the pairs cut by a joint act along the joint normal
-   with the joint friction, see ``_joints``;
+3. smooth joints (``_joints``, YADE JCFpm's smoothJoint with neverErase): the pairs cut by a joint act along
+   the joint normal with the joint friction and keep their reference gap while open, see ``_joints``;
 4. bonds: a normal spring kn_b on the change of the centre distance from its initial value (tension and
    compression) and a shear spring ks_b on the incremental tangential displacement at the bond point; a bond
    breaks when its tensile force would exceed its tensile strength or its shear force its shear strength;
@@ -330,14 +330,21 @@ def build_pairs(x, r, fixed, kin, skin, bstart, bnbr, bidx, b_intact, jkey_tab, 
 
 @njit(cache=True)
 def _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn,
-            force, res):
-    """Smooth joints (as YADE's JCFpm smoothJoint): the pair's contact acts along the joint normal n, not the
-    centre line. A joint contact forms when the spheres overlap (or at t = 0 for touching pairs, set by the
-    caller) with the reference gap initD = |(x_j - x_i).n|; then D = initD - |(x_j - x_i).n| is its normal
-    overlap (force kn D along +-n while D >= 0, the sign that n had at formation), the shear spring takes the
-    centre velocity difference in the joint plane (no rotation, no torque), Coulomb friction tan(phi_joint);
-    the contact is lost when D < 0 or after a cumulative sliding of 2 min(r_i, r_j). Returns active joints."""
+            jkey_tab, jkey_slot, force, res):
+    """Smooth joints (as YADE's JCFpm smoothJoint with neverErase): the pair's contact acts along the joint
+    normal n, not the centre line. A joint contact forms at t = 0 for touching pairs (set by the caller), else
+    when the spheres first overlap, with the reference gap initD = |(x_j - x_i).n|; the pair then keeps that
+    gap for good: D = initD - |(x_j - x_i).n| is its normal overlap (force kn D along +-n while D >= 0, the sign
+    that n had at formation). A joint that opens (D < 0) carries no force and its shear spring is emptied, but
+    it stays a joint with the same reference gap and pushes again as soon as D >= 0: the two faces of a joint
+    stay where they are. The shear spring takes the centre velocity difference in the joint plane (no
+    rotation, no torque), Coulomb friction tan(phi_joint). After a cumulative sliding (in contact) of
+    2 min(r_i, r_j) the spheres are no longer neighbours across the joint: the joint is retired (j_on False,
+    j_init = -1, its key blanked in the joint hash ``jkey_tab``) and the pair is a plain contact from then on.
+    Returns (joints in contact, joints retired in this call); a caller with a pair list rebuilds it when the
+    second is positive."""
     nact = 0
+    nret = 0
     n = np.empty(3)
     vrel = np.empty(3)
     f = np.empty(3)
@@ -354,11 +361,16 @@ def _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_in
                 # slid past its neighbour: lost, its shear energy released
                 res[1] += 0.5 * lawrow[1] * (j_us[k, 0] ** 2 + j_us[k, 1] ** 2 + j_us[k, 2] ** 2)
                 j_on[k] = False
+                j_init[k] = -1.0
                 j_us[k, 0] = 0.0
                 j_us[k, 1] = 0.0
                 j_us[k, 2] = 0.0
+                _blank_key(jkey_tab, jkey_slot, i * x.shape[0] + j)
+                nret += 1
                 continue
         else:
+            if j_init[k] < 0.0:
+                continue  # retired: a plain contact now
             rs = r[i] + r[j]
             if d0 * d0 + d1 * d1 + d2 * d2 >= rs * rs:
                 continue
@@ -384,15 +396,27 @@ def _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_in
         for a in range(3):
             j_us[k, a] = us[a]
         if st == 0:
-            j_on[k] = False
-            continue
+            continue  # open: no force, the pair and its reference gap stay
         j_slide[k] += np.sqrt((vrel[0] - vn * n[0]) ** 2 + (vrel[1] - vn * n[1]) ** 2
                               + (vrel[2] - vn * n[2]) ** 2) * dt
         nact += 1
         for a in range(3):
             force[j, a] += f[a]
             force[i, a] -= f[a]
-    return nact
+    return nact, nret
+
+
+@njit(cache=True)
+def _blank_key(tab, slot, key):
+    """Blank `key` in the open-addressing hash (tab, slot) of build_bond_hash: its entry keeps its slot (the
+    probe chains through it stay intact) but no key matches it any more (keys are >= 0)."""
+    mask = tab.shape[0] - 1
+    h = _hkey(key, mask)
+    while slot[h] >= 0:
+        if tab[h] == key:
+            tab[h] = -1
+            return
+        h = (h + 1) & mask
 
 
 @njit(cache=True, inline="always")
@@ -607,8 +631,10 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
         cur[0] = new
         # smooth joints
         if njoint > 0:
-            stats[6] = _joints(dt, X, V, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide,
-                               j_us, j_sgn, force, res)
+            stats[6], nret = _joints(dt, X, V, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init,
+                                     j_slide, j_us, j_sgn, jkey_tab, jkey_slot, force, res)
+            if nret > 0:
+                nl_flag[0] = 1  # retired joints are plain contacts: into the pair list
         # 3. bonds
         e_bond = 0.0
         nint = 0

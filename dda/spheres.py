@@ -46,8 +46,13 @@ line but across the joint plane, as YADE's JCFpm smoothJoint: normal overlap D =
 measured along the joint's unit normal n from the gap initD the pair had when its contact formed (at the
 start for pairs within (1 + ``joint_touch``) (r_i + r_j), later when the spheres overlap), force kn D along n
 while D >= 0, a shear spring ks on the centre velocity difference in the joint plane with Coulomb friction
-tan(joint friction), no torque; the contact is lost when D < 0 or once the pair has slid 2 min(r_i, r_j)
-(``sim.joint_on``, ``joint_slide``), with fixed walls and with moving blocks alike.
+tan(joint friction), no torque. The pair keeps its reference gap for good (YADE's JCFpm with neverErase, as
+the YADE adapter sets it up): a joint that opens (D < 0) carries no force and loses its shear spring, and
+pushes again as soon as D >= 0 (a joint's two faces stay where they are; re-forming it at a new gap when the
+centres come within r_i + r_j would let a closed joint sink by the opening). Once the pair has slid
+2 min(r_i, r_j) the spheres are no longer neighbours across the joint: the joint is retired and the pair is a
+plain contact (``sim.joint_on`` False, ``joint_init`` -1; ``joint_slide``), with fixed walls and with moving
+blocks alike.
 
 Contacts are searched in a pair list (dda/_spheres.py) rebuilt when a sphere has moved half its margin
 ``skin`` (0.2 r_min): ``sim.stats[7]`` counts the builds.
