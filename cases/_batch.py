@@ -42,15 +42,13 @@ import io
 import json
 import math
 import os
-import pickle
+import re
 import select
 import shutil
 import signal
-import struct
 import subprocess
 import sys
 import time
-import traceback
 from collections import deque
 from pathlib import Path
 
@@ -62,7 +60,6 @@ FIXED_COLUMNS = ("case_id", "status", "error", "wall_s", "rank")
 POLL_S = 0.002
 MAX_ATTEMPTS = 2
 EXIT_ORPHANED = 137
-_HDR = struct.Struct("<Q")
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -114,34 +111,7 @@ def _poll_recv(comm, source, launcher):
 
 
 # --------------------------------------------------------------------------------------------- case process
-def _send(fd, obj):
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    os.write(fd, _HDR.pack(len(data)))
-    view = memoryview(data)
-    while view:
-        n = os.write(fd, view)
-        view = view[n:]
-
-
-def _read_exact(fd, n):
-    chunks = []
-    while n:
-        b = os.read(fd, n)
-        if not b:
-            return None
-        chunks.append(b)
-        n -= len(b)
-    return b"".join(chunks)
-
-
-def _recv(fd):
-    head = _read_exact(fd, _HDR.size)
-    if head is None:
-        return None
-    body = _read_exact(fd, _HDR.unpack(head)[0])
-    return None if body is None else pickle.loads(body)
-
-
+from ._caseserver import _exit_reason, _recv, _send, one_line  # noqa: E402,F401 - the lean case server module
 def _child_env(study_dir, rank):
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_", "OPAL_"))}
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
@@ -155,70 +125,81 @@ def _child_env(study_dir, rank):
 
 
 class CaseProcess:
-    """One case process of this rank; `submit` a request, then `poll` for its outcome."""
+    """The case server of this rank: a process started once (imports, the evaluator's warm-up) that forks a fresh
+    child for every case. `submit` requests (several may queue: they run one after the other), `poll` for
+    outcomes, in submission order."""
 
     def __init__(self, study_dir, rank=0):
         self.study_dir = study_dir
         self.rank = rank
         self.proc = None
-        self.deadline = None
-        self.busy = None
+        self.pending = deque()  # (tag, timeout) in submission order
+        self.front_t0 = None
 
     def start(self):
-        """Start the case process now (it is started on demand otherwise)."""
+        """Start the case server now (it is started on demand otherwise)."""
         if self.proc is None or self.proc.poll() is not None:
             self._start()
 
     def _start(self):
-        self.proc = subprocess.Popen([sys.executable, "-m", "cases._batch"], stdin=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", "cases._caseserver"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, env=_child_env(self.study_dir, self.rank),
                                      start_new_session=True, bufsize=0)
 
     def fileno(self):
         return self.proc.stdout.fileno()
 
-    def submit(self, request, timeout):
+    def submit(self, tag, request, timeout, memory_mb=None):
         if self.proc is None or self.proc.poll() is not None:
             self._start()
-        self.busy = request
-        self.t0 = time.perf_counter()
-        self.deadline = None if timeout is None else self.t0 + timeout
-        self.timeout = timeout
+        if not self.pending:
+            self.front_t0 = time.perf_counter()
+        self.pending.append((tag, timeout))
         try:
-            _send(self.proc.stdin.fileno(), request)
+            _send(self.proc.stdin.fileno(), {**request, "timeout": timeout, "memory_mb": memory_mb})
         except (BrokenPipeError, OSError):
             pass  # seen as a death by poll
 
+    def _backstop(self):
+        """The time after which a case server that neither answers nor dies is killed: the front case's limit
+        (enforced by the server itself) plus a minute."""
+        timeout = self.pending[0][1] if self.pending else None
+        return None if timeout is None else self.front_t0 + timeout + 60.0
+
     def poll(self, wait):
-        """The outcome dict of the running case, or None if it is still running after `wait` seconds."""
-        if self.deadline is not None:
-            wait = max(0.0, min(wait, self.deadline - time.perf_counter())) if wait is not None else \
-                max(0.0, self.deadline - time.perf_counter())
-        ready, _, _ = select.select([self.proc.stdout], [], [], wait)
-        if ready:
+        """[(tag, outcome dict)] of the cases finished within `wait` seconds (None: until one finishes)."""
+        if not self.pending:
+            if wait:
+                time.sleep(wait)
+            return []
+        back = self._backstop()
+        if back is not None:
+            left = max(0.0, back - time.perf_counter())
+            wait = left if wait is None else min(wait, left)
+        out = []
+        while self.pending:
+            ready, _, _ = select.select([self.proc.stdout], [], [], wait if not out else 0)
+            if not ready:
+                break
             msg = _recv(self.fileno())
-            if msg is not None:
-                self.busy = None
-                return msg
-            rc = self.proc.wait()
-            self._reap()
-            sig = -rc if rc < 0 else None
-            try:
-                name = f" ({signal.Signals(sig).name})" if sig else ""
-            except ValueError:
-                name = ""
-            why = f"killed by signal {sig}{name}" if sig else f"exited with status {rc}"
-            self.busy = None
-            self.start()  # the next case finds it ready
-            return {"status": "died", "error": f"case process {why}"}
-        if self.deadline is not None and time.perf_counter() >= self.deadline:
-            wall = time.perf_counter() - self.t0
+            if msg is None:  # the case server died: every queued case is reported died (and handed out again)
+                rc = self.proc.wait()
+                self._reap()
+                why = _exit_reason(rc)
+                out += [(tag, {"status": "died", "error": f"case server {why}"}) for tag, _ in self.pending]
+                self.pending.clear()
+                break
+            tag, _ = self.pending.popleft()
+            self.front_t0 = time.perf_counter()
+            out.append((tag, msg))
+        if not out and back is not None and time.perf_counter() >= back:
+            tag, timeout = self.pending.popleft()
             self.kill()
-            self.busy = None
-            self.start()
-            return {"status": "timeout", "error": f"time limit of {self.timeout:g} s exceeded (killed)",
-                    "wall_s": wall}
-        return None
+            out.append((tag, {"status": "timeout", "error": f"time limit of {timeout:g} s exceeded (case server "
+                                                            "killed)", "wall_s": timeout}))
+            out += [(t, {"status": "died", "error": "case server killed"}) for t, _ in self.pending]
+            self.pending.clear()
+        return out
 
     def _reap(self):
         for f in (self.proc.stdin, self.proc.stdout):
@@ -240,7 +221,7 @@ class CaseProcess:
         if self.proc is None:
             return
         try:
-            self.proc.stdin.close()  # the case process ends at EOF
+            self.proc.stdin.close()  # the case server ends at EOF
             self.proc.wait(timeout=5)
         except (OSError, subprocess.TimeoutExpired):
             self.kill()
@@ -248,83 +229,22 @@ class CaseProcess:
         self._reap()
 
 
-def _child_main():
-    """The case process: read requests on stdin, run the evaluator, answer on (the original) stdout."""
-    try:  # die with the rank
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
-        if str(os.getppid()) != os.environ.get("ROCKDEM_STUDY_PARENT", str(os.getppid())):
-            os._exit(1)
-    except (OSError, AttributeError):
-        pass
-    fin, fout = os.dup(0), os.dup(1)
-    devnull = os.open(os.devnull, os.O_RDWR)
-    os.dup2(devnull, 0)
-    os.dup2(2, 1)
-    saved_err = os.dup(2)
-    from cases.study import resolve_evaluator
-
-    cache = {}
-    while True:
-        req = _recv(fin)
-        if req is None:
-            return 0
-        case_dir = Path(req["case_dir"])
-        shutil.rmtree(case_dir, ignore_errors=True)
-        case_dir.mkdir(parents=True)
-        scene = case_dir / "scene.toml"
-        scene.write_text(req["scene_text"])
-        log = os.open(case_dir / "log.txt", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        os.dup2(log, 1)
-        os.dup2(log, 2)
-        os.close(log)
-        t0 = time.perf_counter()
-        try:
-            key = (req["engine"], req["study_dir"])
-            if key not in cache:
-                cache[key] = resolve_evaluator(req["engine"], req["study_dir"]).fn
-            out = cache[key](scene, case_dir, dict(req["params"]))
-            values = _check_results(out, req["results"])
-            answer = {"status": "ok", "error": "", "results": values}
-        except BaseException as exc:  # noqa: BLE001 - every failure becomes a row
-            if isinstance(exc, KeyboardInterrupt):
-                raise
-            (case_dir / "error.txt").write_text(traceback.format_exc())
-            answer = {"status": "failed", "error": one_line(exc), "results": {}}
-        answer["wall_s"] = time.perf_counter() - t0
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os.dup2(saved_err, 1)
-        os.dup2(saved_err, 2)
-        _send(fout, answer)
-
-
-def one_line(exc):
-    text = str(exc).strip().splitlines()
-    msg = text[0] if text else ""
-    name = type(exc).__name__
-    line = f"{name}: {msg}" if msg else name
-    return line if len(line) <= 500 else line[:497] + "..."
-
-
-def _check_results(out, names):
-    if not isinstance(out, dict):
-        raise TypeError(f"evaluator returned {type(out).__name__}, not a dict of results")
-    values = {}
-    for name in names:
-        if name not in out:
-            raise KeyError(f"evaluator returned no {name!r} (it returned: {', '.join(map(str, out)) or 'nothing'})")
-        v = out[name]
-        if hasattr(v, "item") and getattr(v, "shape", None) == ():
-            v = v.item()
-        if not isinstance(v, (bool, int, float, str)):
-            raise TypeError(f"result {name!r} is a {type(v).__name__}, not a scalar")
-        values[name] = v
-    return values
-
-
 # --------------------------------------------------------------------------------------------- the table
+# A cell is quoted when it holds anything but plain text: the delimiter, the quote, any character that some
+# reader takes for a line end (\r, \n, \v, \f, \x1c-\x1e, \x85, U+2028, U+2029), any other control character,
+# or space at either end. Quoted cells keep every character; csv.reader reads them back whole.
+_NEEDS_QUOTES = re.compile(r'[,"\x00-\x1f\x7f\x85\u2028\u2029]|^\s|\s$')
+
+
+def _quote(cell):
+    return '"' + cell.replace('"', '""') + '"' if _NEEDS_QUOTES.search(cell) else cell
+
+
+def csv_line(cells):
+    """One results.csv record (cells are str) ending in \\n; reads back cell for cell (csv.reader, newline="")."""
+    return ",".join(_quote(c) for c in cells) + "\n"
+
+
 def _cell(v):
     if v is None:
         return ""
@@ -416,6 +336,45 @@ def check_table(path, records, columns=None):
     return records
 
 
+class _Syncer:
+    """A thread that fdatasyncs the table's files after rows were written (group commit): the rows are in the
+    kernel the moment they are written, on the disk a sync later, and no case waits for the disk."""
+
+    def __init__(self, files):
+        import threading
+
+        self.fds = [f.fileno() for f in files]
+        self.event = threading.Event()
+        self.stopping = False
+        self.thread = threading.Thread(target=self._loop, name="table-sync", daemon=True)
+        self.thread.start()
+
+    def dirty(self):
+        self.event.set()
+
+    def _sync(self):
+        for fd in self.fds:
+            try:
+                os.fdatasync(fd)
+            except OSError:
+                pass
+
+    def _loop(self):
+        while not self.stopping:
+            self.event.wait()
+            self.event.clear()
+            self._sync()
+
+    def stop(self):
+        if self.thread is None:
+            return
+        self.stopping = True
+        self.event.set()
+        self.thread.join()
+        self.thread = None
+        self._sync()
+
+
 class Table:
     """results.csv + results.jsonl, append-only, one fsynced write per row (see the module doc)."""
 
@@ -430,20 +389,18 @@ class Table:
         self._recover()
         self.fcsv = open(self.csv_path, "a", encoding="utf-8", newline="")
         self.fjson = open(self.jsonl_path, "a", encoding="utf-8")
+        self._syncer = _Syncer([self.fjson, self.fcsv])
         if self.fcsv.tell() == 0:
             self._write(self.fcsv, self._line(self.columns))
 
     @staticmethod
     def _line(cells):
-        buf = io.StringIO()
-        csv.writer(buf, lineterminator="\n").writerow(cells)
-        return buf.getvalue()
+        return csv_line(cells)
 
-    @staticmethod
-    def _write(fh, text):
+    def _write(self, fh, text):
         fh.write(text)
-        fh.flush()
-        os.fdatasync(fh.fileno())
+        fh.flush()  # in the kernel: a killed runner loses nothing
+        self._syncer.dirty()  # on the disk within milliseconds (a machine crash)
 
     @staticmethod
     def _complete_bytes(path):
@@ -469,7 +426,9 @@ class Table:
         """[(line number, case id, line)] of results.jsonl (every complete line a JSON object with a case_id)."""
         path = self.jsonl_path
         out = []
-        for no, line in enumerate(_text(path, self._complete_bytes(path)).splitlines(keepends=True), 1):
+        text = _text(path, self._complete_bytes(path))
+        lines = [ln + "\n" for ln in text.split("\n")[:-1]]  # only \n ends a line (JSON escapes the others)
+        for no, line in enumerate(lines, 1):
             try:
                 rec = json.loads(line)
             except ValueError:
@@ -499,6 +458,12 @@ class Table:
                 keep.append(line)
         if len(keep) != len(jl):
             self._rewrite(self.jsonl_path, keep)
+        lost = [cid for cid in self.done if cid not in seen]
+        if lost:  # rows on the disk without their JSON line (a machine crash between the two): run them again
+            self._rewrite(self.csv_path, [self._line(cells) for no, cells in records
+                                          if no == records[0][0] or cells[0] not in lost])
+            for cid in lost:
+                del self.done[cid], self.line_of[cid]
 
     def _rewrite(self, path, lines):
         tmp = path.with_name(path.name + ".tmp")
@@ -514,6 +479,7 @@ class Table:
         records = self._records()
         keep = [self._line(cells) for no, cells in records[:1]] + \
             [self._line(cells) for no, cells in records[1:] if cells[1] not in statuses]
+        self._syncer.stop()
         self.fcsv.close()
         self.fjson.close()
         self._rewrite(self.csv_path, keep)
@@ -534,6 +500,7 @@ class Table:
 
     def finish(self, order):
         """All cases in: rewrite both files in case order (atomic)."""
+        self._syncer.stop()
         self.fcsv.close()
         self.fjson.close()
         rank = {cid: i for i, cid in enumerate(order)}
@@ -544,6 +511,7 @@ class Table:
         self._rewrite(self.jsonl_path, [ln for no, cid, ln in sorted(jl, key=lambda r: rank.get(r[1], len(rank)))])
 
     def close(self):
+        self._syncer.stop()
         for fh in (self.fcsv, self.fjson):
             if not fh.closed:
                 fh.close()
@@ -561,7 +529,7 @@ STUDY_COMMAND = "cases study run"
 
 def study_files(case_ids):
     """What a study writes in its output folder (a name ending in '/': a folder, all of it the study's)."""
-    return ["study.json", "results.csv", "results.jsonl", "runs.jsonl", "report.md", "report/",
+    return ["study.json", "results.csv", "results.jsonl", "runs.jsonl", "report.md", "report/", "versions/",
             *(f"cases/{cid}/" for cid in case_ids)]
 
 
@@ -587,10 +555,14 @@ def _check_folder(outdir):
                        "choose a new folder")
 
 
+def _old_ids(old):
+    ids = [c.get("case_id") for c in old.get("cases", []) if isinstance(c, dict)]
+    return [i for i in ids if isinstance(i, str) and i and "/" not in i and i not in (".", "..")]
+
+
 def _remove_study(outdir, old):
     """Remove the files of the study whose study.json is `old` (files added by hand stay)."""
-    ids = [c.get("case_id") for c in old.get("cases", []) if isinstance(c, dict)]
-    for name in study_files(i for i in ids if isinstance(i, str) and i and "/" not in i and i not in (".", "..")):
+    for name in study_files(_old_ids(old)):
         p = outdir / name.rstrip("/")
         if p.is_symlink() or (p.is_file() and not name.endswith("/")):
             p.unlink()
@@ -602,7 +574,40 @@ def _remove_study(outdir, old):
         pass
 
 
-def _prepare(study, outdir, force=False):
+def _archive_study(outdir, old):
+    """Move the files of the study whose study.json is `old` to OUTDIR/versions/vN/ (--new-version); N is
+    returned. Earlier versions stay where they are."""
+    versions = outdir / "versions"
+    n = 1
+    while (versions / f"v{n}").exists():
+        n += 1
+    dest = versions / f"v{n}"
+    dest.mkdir(parents=True)
+    for name in study_files(_old_ids(old)):
+        if name == "versions/":
+            continue
+        p = outdir / name.rstrip("/")
+        if p.exists() or p.is_symlink():
+            target = dest / name.rstrip("/")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(p, target)
+    try:
+        (outdir / "cases").rmdir()
+    except OSError:
+        pass
+    return n
+
+
+def fingerprint_changes(old, new):
+    """The entries of fingerprint `new` that differ from `old` (added, removed or changed), in one phrase."""
+    changed = [k for k in new if k in old and old[k] != new[k]]
+    added = [k for k in new if k not in old]
+    removed = [k for k in old if k not in new]
+    parts = [f"{k} changed" for k in changed] + [f"{k} added" for k in added] + [f"{k} gone" for k in removed]
+    return ", ".join(parts)
+
+
+def _prepare(study, outdir, force=False, new_version=False):
     _check_folder(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     lock = open(outdir / ".lock", "a+")
@@ -613,7 +618,7 @@ def _prepare(study, outdir, force=False):
         raise CliError(f"{outdir}: -o = {str(outdir)!r}: another study run is writing this folder") from None
     info = study.to_json()
     sj = outdir / "study.json"
-    same = False
+    write = True
     if sj.exists():
         from sgim.readback import read_json
 
@@ -622,35 +627,66 @@ def _prepare(study, outdir, force=False):
         except BadFile:
             lock.close()
             raise
-        same = all(old.get(k) == json.loads(json.dumps(info[k])) for k in ("cases", "engine", "results"))
-        if not same and not force:
-            lock.close()
-            raise CliError(f"{outdir}: -o = {str(outdir)!r}: holds a different study (its study.json differs in "
-                           "cases, engine or results): use a new output folder, or --force to replace it")
-        if not same:
+        old_eval = old.get("evaluator", old.get("engine"))
+        same = old_eval == info["evaluator"] and all(old.get(k) == json.loads(json.dumps(info[k]))
+                                                     for k in ("cases", "results"))
+        old_fp = old.get("fingerprint")
+        changes = fingerprint_changes(old_fp, info["fingerprint"]) if isinstance(old_fp, dict) else ""
+        info["version"] = int(old.get("version", 1)) if isinstance(old.get("version", 1), int) else 1
+        if same and not changes:
+            write = not isinstance(old_fp, dict)  # a study.json from before fingerprints gets one
+        elif new_version:
+            info["version"] = _archive_study(outdir, old) + 1
+        elif not same and force:
             _remove_study(outdir, old)
-    if not same:
+        else:
+            lock.close()
+            if not same:
+                raise CliError(f"{outdir}: -o = {str(outdir)!r}: holds a different study (its study.json differs in "
+                               "cases, evaluator or results): use a new output folder, --new-version to keep it in "
+                               "versions/, or --force to replace it")
+            raise CliError(f"{outdir}: -o = {str(outdir)!r}: the study's inputs changed since its table was begun "
+                           f"({changes}): run with --new-version (the earlier results move to versions/) or "
+                           "write to a new folder")
+    else:
+        info["version"] = 1
+    if write:
         tmp = sj.with_name("study.json.tmp")
         tmp.write_text(json.dumps(info, indent=1))
         os.replace(tmp, sj)
     return lock
 
 
-def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_failed=False, force=False):
+class Terminated(BaseException):
+    """SIGTERM (a scheduler ending the job): stop like Ctrl-C; the finished cases are in the table."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_failed=False, force=False,
+              new_version=False, memory_mb=None):
     """Run every case not yet in OUTDIR/results.csv. Serial when comm is None; otherwise call on every rank
     (rank 0 hands out cases and writes the table, all ranks run cases). Returns a summary dict on rank 0.
-    `force`: a folder holding a different study has that study's files removed first (see _prepare)."""
+    `force`: a folder holding a different study has that study's files removed first; `new_version`: a folder
+    holding this study with other inputs (or another study) has them moved to versions/vN/ (see _prepare).
+    `memory_mb`: the address-space limit of every case."""
     outdir = Path(outdir).resolve()
     timeout = timeout if timeout is not None else study.timeout
+    try:
+        signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread
+        pass
     if comm is not None and comm.Get_rank() != 0:
-        _worker(comm, study, outdir, timeout)
+        _worker(comm, study, outdir, timeout, memory_mb)
         return {}
     size = 1 if comm is None else comm.Get_size()
     t0 = time.perf_counter()
     local = CaseProcess(study.path.parent.resolve())
     local.start()  # its imports overlap with the set-up
     try:
-        lock = _prepare(study, outdir, force=force)
+        lock = _prepare(study, outdir, force=force, new_version=new_version)
         table = Table(outdir, [p.path for p in study.params], study.results)
         ids = {c.case_id for c in study.cases}
         for cid, no in table.line_of.items():
@@ -675,7 +711,7 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
         stats[s] = stats.get(s, 0) + 1
     if progress:
         progress(f"{study.name}: {total} cases, {done0} already in {outdir / 'results.csv'}, {len(todo)} to run "
-                 f"on {size} rank(s), engine {study.engine}")
+                 f"on {size} rank(s), evaluator {study.engine}")
     state = {"last": 0.0, "ran": 0}
 
     def record(i, row, rank):
@@ -694,12 +730,13 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
             progress(f"{n}/{total} cases done, {stats['failed']} failed, {stats['timeout']} timeout, "
                      f"ETA {eta:.0f} s{extra}")
 
+    run = _Run(study, outdir, timeout, memory_mb, record)
     try:
         if comm is None:
-            _serial(study, outdir, todo, timeout, local, record)
+            _serial(run, todo, local)
         else:
             try:
-                _master(comm, study, outdir, todo, timeout, local, record)
+                _master(comm, run, todo, local)
             except Orphaned:
                 local.kill()
                 table.close()
@@ -710,7 +747,7 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
                     pass
                 os._exit(EXIT_ORPHANED)
     except BaseException:
-        local.kill()  # Ctrl-C or an error of the runner: the running case goes with it
+        local.kill()  # Ctrl-C, SIGTERM or an error of the runner: the running cases go with it
         raise
     finally:
         local.close()
@@ -718,12 +755,25 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
             table.finish([c.case_id for c in study.cases])
         table.close()
         lock.close()
-    summary = {"outdir": str(outdir), "total": total, "done": len(table.done), "ran": state["ran"], "ranks": size,
-               "wall_s": time.perf_counter() - t0, **{k: stats.get(k, 0) for k in ("ok", "failed", "timeout")},
+    summary = {"outdir": str(outdir), "study": study.name, "total": total, "done": len(table.done),
+               "ran": state["ran"], "ranks": size, "wall_s": time.perf_counter() - t0,
+               **{k: stats.get(k, 0) for k in ("ok", "failed", "timeout")},
+               "results_csv": str(outdir / "results.csv"),
                "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     with open(outdir / "runs.jsonl", "a") as fh:  # one line per run of the study (restarts included)
         fh.write(json.dumps(summary) + "\n")
     return summary
+
+
+class _Run:
+    """What every loop needs: the requests of cases, the limits, the table's record function."""
+
+    def __init__(self, study, outdir, timeout, memory_mb, record):
+        self.study, self.outdir, self.timeout, self.memory_mb, self.record = study, outdir, timeout, memory_mb, record
+
+    def submit(self, local, i, attempt):
+        local.submit((i, attempt), _request(self.study, self.outdir, self.study.cases[i]), self.timeout,
+                     self.memory_mb)
 
 
 def _died_row(outcome, attempts):
@@ -731,30 +781,38 @@ def _died_row(outcome, attempts):
             "results": {}}
 
 
-def _serial(study, outdir, todo, timeout, local, record):
-    for i in todo:
-        for attempt in range(1, MAX_ATTEMPTS + 1):
-            local.submit(_request(study, outdir, study.cases[i]), timeout)
-            out = None
-            while out is None:
-                out = local.poll(None)
+# cases queued in a case server beyond the running one: the next case starts the moment one ends (no round trip
+# to rank 0); only while cases are short, so that no case waits behind a long one while a rank is idle
+PREFETCH_BELOW_S = 0.25
+
+
+def _serial(run, todo, local):
+    queue = deque((i, 1) for i in todo)
+    while queue or local.pending:
+        while queue and len(local.pending) < 2:
+            run.submit(local, *queue.popleft())
+        for (i, attempt), out in local.poll(None):
             if out["status"] != "died":
-                record(i, out, 0)
-                break
-            if attempt == MAX_ATTEMPTS:
-                record(i, _died_row(out, attempt), 0)
+                run.record(i, out, 0)
+            elif attempt < MAX_ATTEMPTS:
+                queue.appendleft((i, attempt + 1))
+            else:
+                run.record(i, _died_row(out, attempt), 0)
 
 
-def _master(comm, study, outdir, todo, timeout, local, record):
+def _master(comm, run, todo, local):
     from mpi4py import MPI
 
     queue = deque((i, 1, None) for i in todo)  # (case index, attempt, rank to avoid)
     size = comm.Get_size()
-    inflight = {}  # rank -> (i, attempt)
-    waiting = set()  # ranks with nothing to do
+    inflight = {r: [] for r in range(size)}  # rank -> [(i, attempt)]
     stopped = set()
     st = MPI.Status()
     launcher = _Launcher()
+    walls = deque(maxlen=16)
+
+    def depth():
+        return 2 if len(walls) >= 2 and sorted(walls)[len(walls) // 2] < PREFETCH_BELOW_S else 1
 
     def take(rank):
         for k, (i, attempt, avoid) in enumerate(queue):
@@ -763,88 +821,85 @@ def _master(comm, study, outdir, todo, timeout, local, record):
                 return i, attempt
         return None if not queue else queue.popleft()[:2]
 
-    def give(rank):
-        job = take(rank)
-        if job is None:
-            return False
-        inflight[rank] = job
-        if rank == 0:
-            local.submit(_request(study, outdir, study.cases[job[0]]), timeout)
-        else:
-            comm.send(("case", job[0], job[1]), dest=rank)
-        return True
+    def fill(rank):
+        while len(inflight[rank]) < depth() and queue:
+            job = take(rank)
+            inflight[rank].append(job)
+            if rank == 0:
+                run.submit(local, *job)
+            else:
+                comm.send(("case", job[0], job[1]), dest=rank)
 
     def finished(rank, i, outcome):
-        job = inflight.pop(rank)
+        job = next(j for j in inflight[rank] if j[0] == i)
+        inflight[rank].remove(job)
+        if outcome.get("wall_s") is not None:
+            walls.append(outcome["wall_s"])
         if outcome["status"] == "died":
             if job[1] < MAX_ATTEMPTS:
                 queue.appendleft((i, job[1] + 1, rank))
             else:
-                record(i, _died_row(outcome, job[1]), rank)
+                run.record(i, _died_row(outcome, job[1]), rank)
         else:
-            record(i, outcome, rank)
+            run.record(i, outcome, rank)
 
-    give(0)
-    while queue or inflight or len(stopped) < size - 1:
+    fill(0)
+    while True:
         launcher.check()
-        # requests and results from the other ranks
         while comm.Iprobe(source=MPI.ANY_SOURCE, tag=MPI.ANY_TAG, status=st):
             src = st.Get_source()
             msg = comm.recv(source=src, tag=st.Get_tag())
             if msg[0] == "done":
                 finished(src, msg[1], msg[2])
-            elif msg[0] == "died":
-                finished(src, msg[1], msg[2])
-            waiting.add(src)
-        for r in sorted(waiting):
-            if give(r):
-                waiting.discard(r)
-        if 0 not in inflight and queue:
-            give(0)
-        if not queue and not inflight:
-            for r in sorted(waiting):
-                comm.send(("stop",), dest=r)
-                stopped.add(r)
-            waiting.clear()
-            if len(stopped) >= size - 1:
+        for r in range(size):
+            if r not in stopped:
+                fill(r)
+        if not queue:
+            for r in range(1, size):
+                if r not in stopped and not inflight[r]:
+                    comm.send(("stop",), dest=r)
+                    stopped.add(r)
+            if len(stopped) >= size - 1 and not inflight[0]:
                 break
-            time.sleep(POLL_S)
-            continue
-        if 0 in inflight:
-            out = local.poll(POLL_S)
-            if out is not None:
-                finished(0, inflight[0][0], out)
-                if queue:
-                    give(0)
+        if inflight[0]:
+            for (i, _), out in local.poll(POLL_S):
+                finished(0, i, out)
         else:
             time.sleep(POLL_S)
 
 
-def _worker(comm, study, outdir, timeout):
+def _worker(comm, study, outdir, timeout, memory_mb):
+    from mpi4py import MPI
+
     rank = comm.Get_rank()
     local = CaseProcess(study.path.parent.resolve(), rank)
     local.start()
     launcher = _Launcher()
+    run = _Run(study, outdir, timeout, memory_mb, None)
+    st = MPI.Status()
     try:
-        comm.send(("ready",), dest=0)
         while True:
-            msg, _ = _poll_recv(comm, 0, launcher)
-            if msg[0] != "case":
+            launcher.check()
+            stop = False
+            while comm.Iprobe(source=0, tag=MPI.ANY_TAG, status=st):
+                msg = comm.recv(source=0, tag=st.Get_tag())
+                if msg[0] != "case":
+                    stop = True
+                    break
+                run.submit(local, msg[1], msg[2])
+            if stop:
                 break
-            i = msg[1]
-            local.submit(_request(study, outdir, study.cases[i]), timeout)
-            out = None
-            while out is None:
-                out = local.poll(0.5)
-                launcher.check()
-            out["rank"] = rank
-            comm.send(("died" if out["status"] == "died" else "done", i, out), dest=0)
+            for (i, _), out in local.poll(POLL_S if local.pending else None):
+                out["rank"] = rank
+                comm.send(("done", i, out), dest=0)
+            if not local.pending:
+                time.sleep(POLL_S / 2)
     except Orphaned:
         local.kill()
         os._exit(EXIT_ORPHANED)
+    except BaseException:
+        local.kill()
+        raise
     finally:
         local.close()
 
-
-if __name__ == "__main__":
-    sys.exit(_child_main())

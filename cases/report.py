@@ -35,9 +35,123 @@ from sgim.cli import CliError
 from sgim.readback import BadFile, read_json
 
 FIXED = ("case_id", "status", "error", "wall_s", "rank")
+
+# -- names and units: the evaluator's declaration (study.json "units", with the study's own `units` table)
+# first, then these tables of the keys the project's scenes and evaluators use (matched on the last segment of
+# a parameter path)
+PARAM_NAMES = {
+    "friction": ("joint friction angle", "deg"), "cohesion": ("cohesion", "Pa"), "kn": ("normal stiffness kn", "N/m"),
+    "ks": ("shear stiffness ks", "N/m"), "damping": ("damping ratio", "-"), "safety": ("time-step safety factor", "-"),
+    "dt": ("time step", "s"), "duration": ("simulated time", "s"), "height": ("height", "m"),
+    "joint_a": ("joint A orientation", "deg"), "joint_b": ("joint B orientation", "deg"),
+    "face": ("slope face orientation", "deg"), "top": ("top face orientation", "deg"), "dip": ("dip", "deg"),
+    "dip_direction": ("dip direction", "deg"), "seed": ("random seed", "-"), "radius": ("sphere radius", "m"),
+    "r": ("sphere radius", "m"), "density": ("density", "kg/m^3"), "angle": ("slope angle", "deg"),
+    "bond_young": ("bond Young's modulus", "Pa"), "young": ("Young's modulus", "Pa"), "kappa": ("Fisher kappa", "-"),
+    "tensile": ("tensile strength", "Pa"), "gravity": ("gravity", "m/s^2"), "size": ("size", "m"),
+}
+RESULT_NAMES = {
+    "fs": "factor of safety", "fs_hb": "factor of safety (Hoek & Bray)", "fs_dda": "factor of safety (DDA)",
+    "phi_crit": "critical friction angle", "phi_crit_hb": "critical friction angle (Hoek & Bray)",
+    "phi_crit_dda": "critical friction angle (DDA)", "wedge": "wedge forms (1) or not (0)",
+    "two_planes": "sliding on both joints (1) or one (0)", "plunge": "plunge of the line of intersection",
+    "trend": "trend of the line of intersection", "volume": "wedge volume", "displacement": "displacement of the "
+    "tracked block", "moved": "blocks that moved", "steps": "time steps", "dt": "time step", "dt_ratio":
+    "time step / critical time step", "reference": "analytical displacement", "spheres": "spheres",
+    "red_fraction": "fraction of spheres in faults (red)", "packing_density": "packing density",
+    "detached_clusters": "detached clusters", "detached_spheres": "spheres in detached clusters",
+    "largest_detached": "largest detached cluster", "kept_volume": "kept volume", "exact_volume": "exact volume",
+    "detached": "detached spheres", "max_displacement": "largest sphere displacement",
+    "mean_displacement": "mean sphere displacement", "bonds_broken": "broken bonds", "trials": "DDA trials",
+    "steps_per_trial": "steps per trial", "n": "spheres", "value": "value",
+}
+# what each error column means: (short formula for axes, sentence for titles and the text)
+ERRORS = {
+    "error_fs": ("FS_DDA / FS_HB - 1", "relative error of the DDA factor of safety against Hoek & Bray"),
+    "error_phi": ("phi_DDA / phi_HB - 1", "relative error of the DDA critical friction angle against Hoek & Bray"),
+    "error_disp": ("s / s_ref - 1", "relative error of the displacement against the analytical reference"),
+    "error_energy": ("energy balance error / energy in play", "energy balance error relative to the mechanical "
+                     "energy in play"),
+    "error_volume": ("V_kept / V_exact - 1", "relative error of the excavated volume against the exact volume"),
+    "error_detached": ("wrong spheres / spheres", "fraction of spheres whose state differs from the reference"),
+}
+NO_UNIT = ("", "-", "count")
 MC_METHODS = ("random", "lhs", "realisations", "monte-carlo", "montecarlo")
 MC_SPECS = ("uniform", "normal", "fisher", "realisations", "lognormal")
 TIME_COLUMNS = ("run_s", "build_s", "excavate_s", "engine_s")
+
+
+def is_timing(col, units=None):
+    """Timing columns (the runner's wall_s, an evaluator's run_s, build_s, ...): reported apart from results."""
+    return col == "wall_s" or col in TIME_COLUMNS or (col.endswith("_s") and (units or {}).get(col, "s") == "s")
+
+
+class Names:
+    """Readable names, units and labels of a study's columns (parameters as ``p:<path>``)."""
+
+    def __init__(self, study):
+        u = study.get("units")
+        self.units = dict(u) if isinstance(u, dict) else {}
+        self.study = str(study.get("name") or "study")
+
+    def unit(self, col):
+        key = col[2:] if col.startswith("p:") else col
+        if key in self.units:
+            return str(self.units[key])
+        if col.startswith("p:"):
+            seg = [x for x in key.split(".") if not x.isdigit()]
+            return PARAM_NAMES.get(seg[-1] if seg else key, ("", ""))[1]
+        if col in ERRORS or col.startswith("error_"):
+            return "relative"
+        if is_timing(col, self.units):
+            return "s"
+        return ""
+
+    def name(self, col):
+        if col.startswith("p:"):
+            path = col[2:]
+            seg = path.split(".")
+            last = [x for x in seg if not x.isdigit()]
+            base = PARAM_NAMES.get(last[-1], (None,))[0] if last else None
+            return f"{base} ({path})" if base else path
+        if col in ERRORS:
+            return ERRORS[col][1]
+        if col == "wall_s":
+            return "wall time per case (runner)"
+        if col in TIME_COLUMNS:
+            return {"run_s": "run time", "build_s": "build time", "excavate_s": "excavation time",
+                    "engine_s": "engine time"}[col] + " (evaluator)"
+        return RESULT_NAMES.get(col, col.replace("_", " "))
+
+    def label(self, col, absolute=False):
+        """Axis label: readable name [unit]; an error as |formula| [relative]."""
+        u = self.unit(col)
+        tail = "" if u in NO_UNIT else f" [{u}]"
+        if col in ERRORS:
+            f = ERRORS[col][0]
+            return (f"|{f}|" if absolute else f) + tail
+        if col.startswith("error_"):
+            return (f"|{col}|" if absolute else col) + tail
+        return self.name(col) + tail
+
+    def title(self, what):
+        return f"{self.study}: {what}"
+
+
+def column_format(values):
+    """One format for every number of a column: integers as integers; otherwise fixed decimals enough for four
+    significant digits of the column's smallest magnitude, or scientific when the column spans beyond 1e-3..1e5."""
+    v = np.asarray([x for x in values if isinstance(x, (int, float)) and math.isfinite(x)], float)
+    if not len(v):
+        return lambda x: _fmt(x)
+    if np.all(v == np.round(v)) and np.all(np.abs(v) < 1e5):
+        return lambda x: f"{int(x)}" if isinstance(x, (int, float)) and math.isfinite(x) else _fmt(x)
+    a = np.abs(v[v != 0])
+    if len(a) and (a.max() >= 1e5 or a.min() < 1e-3):
+        return lambda x: f"{x:.3e}" if isinstance(x, (int, float)) and math.isfinite(x) else _fmt(x)
+    lo = a.min() if len(a) else 1.0
+    dec = int(min(6, max(0, 3 - math.floor(math.log10(lo)))))
+    return lambda x: f"{x:.{dec}f}" if isinstance(x, (int, float)) and math.isfinite(x) else _fmt(x)
 FS_RE = re.compile(r"^fs($|_)")
 MAX_TABLE_ROWS = 40
 MAX_PLOTS = 24
@@ -224,7 +338,7 @@ def _fmt(v, digits=4):
         return f"{v:.{digits}g}"
     if isinstance(v, list):
         return "[" + ", ".join(_fmt(x, 4) for x in v) + "]"
-    return str(v).replace("|", "\\|").replace("\n", " ")
+    return " ".join(str(v).replace("|", "\\|").splitlines())
 
 
 def _slug(text):
@@ -252,20 +366,34 @@ def _save(fig, path):
     return path
 
 
-def plot_distribution(path, cols, data, fs=False):
+def spans_decades(v, factor=10.0):
+    """True when the finite values are all > 0 and the largest is more than `factor` times the smallest."""
+    v = np.asarray(v, float)
+    v = v[np.isfinite(v)]
+    return bool(len(v) > 1 and v.min() > 0 and v.max() / v.min() > factor)
+
+
+def _bins(v, n=None):
+    n = n or min(30, max(5, int(np.sqrt(max(len(v), 1)))))
+    if spans_decades(v):
+        return np.geomspace(v.min(), v.max(), n + 1), True
+    return np.histogram_bin_edges(v, bins=n), False
+
+
+def plot_distribution(path, cols, data, names, fs=False):
     """Histogram (left) and, right, the exceedance curve P(X > x), or P(FS < x) for factors of safety with the
-    line FS = 1; `cols` drawn on the same axes (same samples)."""
+    line FS = 1; `cols` drawn on the same axes (same samples). Log x axis when the values span more than 10x."""
     plt = _plt()
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4.2))
     finite = [data[c][np.isfinite(data[c])] for c in cols]
     allv = np.concatenate(finite) if finite else np.zeros(0)
-    bins = np.histogram_bin_edges(allv, bins=min(30, max(5, int(np.sqrt(max(len(allv), 1)))))) if len(allv) else 10
+    bins, logx = _bins(allv) if len(allv) else (10, False)
     styles = ["-", "--", ":", "-."]
     for m, (c, v) in enumerate(zip(cols, finite)):
-        label = c
+        label = names.name(c)
         if fs:
             pof, k, n = probability_of_failure(data[c])
-            label = f"{c}: PoF = {pof:.3f} ({k}/{n})"
+            label = f"{label}: PoF = {pof:.3f} ({k}/{n})"
         if m == 0:
             a1.hist(v, bins=bins, alpha=0.5 if len(cols) > 1 else 0.9, label=label, color="C0")
         else:  # later columns as outlines: equal distributions stay visible
@@ -278,20 +406,26 @@ def plot_distribution(path, cols, data, fs=False):
             a2.step(np.r_[x[0], x], np.r_[0.0, np.searchsorted(x, x, side="right") / max(n, 1)], where="post",
                     label=label, ls=styles[m % 4], color=f"C{m}")
         else:  # P(X > x): 1 left of the smallest value
-            a2.step(np.r_[x[0], x], np.r_[1.0, p], where="post", label=c, ls=styles[m % 4], color=f"C{m}")
+            a2.step(np.r_[x[0], x], np.r_[1.0, p], where="post", label=label, ls=styles[m % 4], color=f"C{m}")
+    what = names.name(cols[0]) if len(cols) == 1 else ", ".join(names.name(c) for c in cols)
+    xlabel = names.label(cols[0]) if len(cols) == 1 else (
+        "factor of safety" if fs else ", ".join(names.label(c) for c in cols))
     if fs:
         for ax in (a1, a2):
             ax.axvline(1.0, color="k", lw=0.8, ls="--")
         a2.set_ylabel("P(FS < x)")
-        a2.set_title("probability of failure against the FS threshold x")
+        a2.set_title(names.title("probability of failure P(FS < x)"), fontsize=10)
+        a1.set_title(names.title("factor of safety, cases per bin"), fontsize=10)
     else:
         a2.set_ylabel("P(X > x)")
-        a2.set_title("exceedance")
-    a1.set_title("histogram")
+        a2.set_title(names.title(f"exceedance of {what}"), fontsize=10)
+        a1.set_title(names.title(f"{what}, cases per bin"), fontsize=10)
     a1.set_ylabel("cases")
     for ax in (a1, a2):
-        ax.set_xlabel(", ".join(cols))
+        ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3)
+        if logx:
+            ax.set_xscale("log")
     if fs or len(cols) > 1:
         a1.legend(fontsize=8)
         a2.legend(fontsize=8, loc="best")
@@ -299,30 +433,39 @@ def plot_distribution(path, cols, data, fs=False):
     return _save(fig, path)
 
 
-def plot_response(path, col, params, data, rows):
-    """Response of result `col` over one numeric parameter (line per value of a second, if any) or two
-    (colour map on the full grid, else a coloured scatter)."""
+def _tick_labels(values, fmt):
+    return [fmt(float(v)) for v in values]
+
+
+def plot_response(path, col, params, data, rows, names):
+    """Response of result `col` over one numeric parameter (a line) or two (colour map on the full grid, else a
+    coloured scatter). Errors are drawn as their size; log scales where values span more than 10x."""
     plt = _plt()
     from matplotlib.colors import LogNorm
 
     y = data[col]
-    label = col
-    if col.startswith("error_"):  # errors: their size, on a log scale when it spans decades
-        y, label = np.abs(y), f"|{col}|"
-    fy = y[np.isfinite(y)]
-    logscale = len(fy) > 1 and fy.min() > 0 and fy.max() / fy.min() > 100
+    is_err = col.startswith("error_")
+    if is_err:
+        y = np.abs(y)
+    label = names.label(col, absolute=is_err)
+    logscale = spans_decades(y)
+    fmt_y = column_format(list(y))
+    what = names.name(col)
     if len(params) == 1:
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig, ax = plt.subplots(figsize=(6.5, 4.2))
         x = _numeric(rows, params[0])
         o = np.argsort(x)
         ax.plot(x[o], y[o], "o-")
-        ax.set_xlabel(params[0])
-        if np.all(x[np.isfinite(x)] > 0) and np.nanmax(x) / max(np.nanmin(x), 1e-300) > 50:
+        ax.set_xlabel(names.label(params[0]))
+        if spans_decades(x):
             ax.set_xscale("log")
         if logscale:
             ax.set_yscale("log")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3, which="both")
+        ax.set_title(names.title(f"{what} against {names.name(params[0])}"), fontsize=10)
     else:
-        fig, ax = plt.subplots(figsize=(6.5, 4.5))
+        fig, ax = plt.subplots(figsize=(7.5, 5.2))
         px, py = params[0], params[1]
         x, yy = _numeric(rows, px), _numeric(rows, py)
         xs, ys = np.unique(x[np.isfinite(x)]), np.unique(yy[np.isfinite(yy)])
@@ -332,50 +475,138 @@ def plot_response(path, col, params, data, rows):
             for xv, yv, v in zip(x, yy, y):
                 grid[np.searchsorted(ys, yv), np.searchsorted(xs, xv)] = v
             full = bool(np.isfinite(grid).sum() >= 2)
+        norm = LogNorm() if logscale else None
         if full:
             # cells centred on the grid values (index space: uneven and logarithmic grids stay readable)
             m = ax.pcolormesh(np.arange(len(xs) + 1) - 0.5, np.arange(len(ys) + 1) - 0.5, grid, shading="flat",
-                              norm=LogNorm() if logscale else None)
-            ax.set_xticks(range(len(xs)), [_fmt(v, 3) for v in xs])
-            ax.set_yticks(range(len(ys)), [_fmt(v, 3) for v in ys])
+                              norm=norm, cmap="viridis")
+            ax.set_xticks(range(len(xs)), _tick_labels(xs, column_format(list(xs))))
+            ax.set_yticks(range(len(ys)), _tick_labels(ys, column_format(list(ys))))
             for i in range(len(ys)):
                 for j in range(len(xs)):
                     if np.isfinite(grid[i, j]):
-                        ax.text(j, i, _fmt(float(grid[i, j]), 3), ha="center", va="center", fontsize=7,
+                        ax.text(j, i, fmt_y(float(grid[i, j])), ha="center", va="center", fontsize=7,
                                 bbox=dict(boxstyle="round,pad=0.15", fc="w", ec="none", alpha=0.7))
         else:
-            m = ax.scatter(x, yy, c=y, s=40, norm=LogNorm() if logscale else None)
-        fig.colorbar(m, ax=ax, label=label)
-        ax.set_xlabel(px)
-        ax.set_ylabel(py)
-    ax.set_title(label)
-    if len(params) == 1:
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
+            m = ax.scatter(x, yy, c=y, s=40, norm=norm, cmap="viridis")
+            if spans_decades(x):
+                ax.set_xscale("log")
+            if spans_decades(yy):
+                ax.set_yscale("log")
+        fig.colorbar(m, ax=ax, label=label + (" (log scale)" if logscale else ""))
+        ax.set_xlabel(names.label(px))
+        ax.set_ylabel(names.label(py))
+        ax.set_title(names.title(what), fontsize=10)
     fig.tight_layout()
     return _save(fig, path)
 
 
-def plot_speed_error(path, col, t, err, front, labels, tname):
+def plot_speed_error(path, col, t, err, front, labels, tname, names):
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    fig, ax = plt.subplots(figsize=(7, 4.8))
     e = np.abs(err)
     ok = np.isfinite(t) & np.isfinite(e)
     ax.scatter(t[ok & ~front], e[ok & ~front], c="0.5", s=30, label="case")
     o = np.flatnonzero(front)
     o = o[np.argsort(t[o])]
-    ax.plot(t[o], e[o], "o-", c="C3", ms=7, label="Pareto front")
+    ax.plot(t[o], e[o], "o-", c="C3", ms=7, label="Pareto front (no case is both faster and more accurate)")
     for k in o:  # the front's points carry their parameters (every case is in the report's table)
         ax.annotate(labels[k], (t[k], e[k]), fontsize=6, xytext=(4, 4), textcoords="offset points", color="C3")
-    if np.all(t[ok] > 0):
+    if np.all(t[ok] > 0) and spans_decades(t[ok], 3.0):
         ax.set_xscale("log")
-    if np.all(e[ok] > 0):
+    if np.all(e[ok] > 0) and spans_decades(e[ok], 3.0):
         ax.set_yscale("log")
-    ax.set_xlabel(f"{tname} [s]")
-    ax.set_ylabel(f"|{col}|")
-    ax.set_title(f"speed against error: {col}")
+    ax.set_xlabel(names.label(tname))
+    ax.set_ylabel(names.label(col, absolute=True))
+    ax.set_title(names.title(f"speed against {names.name(col)}"), fontsize=9)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def _orientation(v):
+    """(dip, dip direction) of a sampled orientation cell: [dip, dd] or {"dip": .., "dip_direction": ..}."""
+    if isinstance(v, dict) and "dip" in v and "dip_direction" in v:
+        v = [v["dip"], v["dip_direction"]]
+    if isinstance(v, list) and len(v) == 2 and all(isinstance(x, (int, float)) for x in v):
+        dip, dd = float(v[0]), float(v[1])
+        if dip < 0:
+            dip, dd = -dip, dd + 180.0
+        if dip > 90:
+            dip, dd = 180.0 - dip, dd + 180.0
+        return dip, dd % 360.0
+    return None
+
+
+def pole_projection(dip, dip_direction):
+    """(x east, y north) of the pole of a plane on the lower-hemisphere equal-area (Schmidt) net of radius 1: the
+    pole plunges 90 - dip towards dip direction + 180, at distance sqrt(2) sin((90 - plunge) / 2) = sqrt(2)
+    sin(dip / 2) from the centre."""
+    d, a = np.radians(np.asarray(dip, float)), np.radians(np.asarray(dip_direction, float) + 180.0)
+    r = np.sqrt(2.0) * np.sin(d / 2.0)
+    return r * np.sin(a), r * np.cos(a)
+
+
+def plot_inputs(path, study, rows, names):
+    """The sampled inputs: orientation parameters on an equal-area stereonet of poles (lower hemisphere), the
+    others as histograms. Returns the path, or None when no parameter is sampled."""
+    specs = _param_specs(study)
+    panels = []
+    for p, spec in specs.items():
+        kind = next(iter(spec)) if isinstance(spec, dict) and spec else None
+        if kind not in ("uniform", "normal", "fisher", "lognormal"):
+            continue
+        vals = [r.get(f"p:{p}") for r in rows]
+        if kind == "fisher":
+            o = [x for x in (_orientation(v) for v in vals) if x is not None]
+            if o:
+                panels.append(("stereo", p, np.array(o), spec[kind]))
+        else:
+            v = np.array([x for x in vals if isinstance(x, float) and math.isfinite(x)])
+            if len(v):
+                panels.append(("hist", p, v, spec[kind]))
+    if not panels:
+        return None
+    plt = _plt()
+    n = len(panels)
+    cols = min(n, 3)
+    nrow = (n + cols - 1) // cols
+    fig, axes = plt.subplots(nrow, cols, figsize=(4.4 * cols, 4.3 * nrow), squeeze=False)
+    for ax, (kind, p, v, spec) in zip(axes.flat, panels):
+        if kind == "stereo":
+            t = np.linspace(0, 2 * np.pi, 361)
+            ax.plot(np.sin(t), np.cos(t), "k-", lw=1)
+            ax.plot([0, 0], [-1, 1], color="0.8", lw=0.6)
+            ax.plot([-1, 1], [0, 0], color="0.8", lw=0.6)
+            for lab, (x0, y0) in (("N", (0, 1.06)), ("E", (1.08, 0)), ("S", (0, -1.1)), ("W", (-1.1, 0))):
+                ax.text(x0, y0, lab, ha="center", va="center", fontsize=9)
+            x, y = pole_projection(v[:, 0], v[:, 1])
+            ax.plot(x / np.sqrt(2), y / np.sqrt(2), ".", ms=4, color="C0", label=f"{len(v)} sampled poles")
+            if isinstance(spec, dict) and "dip" in spec:
+                mx, my = pole_projection(spec["dip"], spec["dip_direction"])
+                ax.plot(mx / np.sqrt(2), my / np.sqrt(2), "r+", ms=12, mew=2,
+                        label=f"mean {spec['dip']:g}/{spec['dip_direction']:03.0f}, kappa {spec.get('kappa', 0):g}")
+            ax.set_aspect("equal")
+            ax.set_xlim(-1.2, 1.2)
+            ax.set_ylim(-1.2, 1.2)
+            ax.axis("off")
+            ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.05, -0.12))
+            ax.set_title(f"{names.name('p:' + p)}\npoles, equal-area lower hemisphere", fontsize=9)
+        else:
+            bins, logx = _bins(v)
+            ax.hist(v, bins=bins, color="C0", alpha=0.85)
+            if logx:
+                ax.set_xscale("log")
+            ax.set_xlabel(names.label("p:" + p))
+            ax.set_ylabel("cases")
+            ax.grid(alpha=0.3)
+            sk = next(iter(spec)) if isinstance(spec, dict) else ""
+            ax.set_title(f"{names.name('p:' + p)}\n{sk} {spec.get(sk) if isinstance(spec, dict) else ''}",
+                         fontsize=9)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    fig.suptitle(names.title("sampled inputs"), fontsize=11)
     fig.tight_layout()
     return _save(fig, path)
 
@@ -388,15 +619,16 @@ def _summary_lines(study, rows, outdir):
     planned = study.get("cases")
     n_planned = len(planned) if isinstance(planned, (list, dict)) else None
     status = [r.get("status") for r in rows]
-    wall = _numeric(rows, "wall_s")
     ranks = {r.get("rank") for r in rows if r.get("rank") is not None}
     lines = ["| | |", "|---|---|"]
     lines.append(f"| study | {study.get('name', Path(outdir).name)} |")
-    lines.append(f"| engine | {study.get('engine', '?')} |")
+    lines.append(f"| evaluator | {study.get('evaluator', study.get('engine', '?'))} |")
     if _method(study):
         lines.append(f"| sampling | {_method(study)} |")
     if study.get("seed") is not None:
         lines.append(f"| seed | {study.get('seed')} |")
+    if study.get("version") is not None:
+        lines.append(f"| version | {study.get('version')} |")
     lines.append(f"| cases planned | {n_planned if n_planned is not None else '?'} |")
     for s in ("ok", "failed", "timeout"):
         lines.append(f"| {s} | {status.count(s)} |")
@@ -405,65 +637,105 @@ def _summary_lines(study, rows, outdir):
         lines.append(f"| other status | {other} |")
     if n_planned is not None:
         lines.append(f"| not run | {max(n_planned - len(rows), 0)} |")
-    if np.isfinite(wall).any():
-        lines.append(f"| total wall time of the cases | {np.nansum(wall):.1f} s |")
-        lines.append(f"| median / max per case | {np.nanmedian(wall):.3g} s / {np.nanmax(wall):.3g} s |")
     if ranks:
         lines.append(f"| ranks that ran cases | {len(ranks)} |")
     return lines
 
 
-def _stats_table(cols, data):
-    out = ["| result | n | mean | sd | min | 5 % | median | 95 % | max |",
-           "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+def _timing_lines(rows, ok_rows, tcols, names):
+    out = ["| timing | unit | cases | total | median | max |", "|---|---|---:|---:|---:|---:|"]
+    for c in ["wall_s", *tcols]:
+        v = _numeric(rows if c == "wall_s" else ok_rows, c)
+        v = v[np.isfinite(v)]
+        if not len(v):
+            continue
+        f = column_format([float(v.sum()), *v])
+        out.append(f"| {names.name(c)} (`{c}`) | s | {len(v)} | {f(float(v.sum()))} | {f(float(np.median(v)))} | "
+                   f"{f(float(v.max()))} |")
+    return out
+
+
+def _stats_table(cols, data, names):
+    out = ["| result | unit | n | mean | sd | min | 5 % | median | 95 % | max |",
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for c in cols:
         v = data[c][np.isfinite(data[c])]
+        u = names.unit(c) or "-"
         if not len(v):
-            out.append(f"| {c} | 0 | | | | | | | |")
+            out.append(f"| {c} | {u} | 0 | | | | | | | |")
             continue
         q = np.percentile(v, [5, 50, 95])
-        out.append(f"| {c} | {len(v)} | {_fmt(float(v.mean()))} | {_fmt(float(v.std(ddof=1)) if len(v) > 1 else 0.0)} "
-                   f"| {_fmt(float(v.min()))} | {_fmt(float(q[0]))} | {_fmt(float(q[1]))} | {_fmt(float(q[2]))} "
-                   f"| {_fmt(float(v.max()))} |")
+        sd = float(v.std(ddof=1)) if len(v) > 1 else 0.0
+        stats = [float(v.mean()), sd, float(v.min()), float(q[0]), float(q[1]), float(q[2]), float(v.max())]
+        f = column_format(stats if not np.all(v == np.round(v)) else list(v))
+        if np.all(v == np.round(v)):  # counts: mean and sd are not integers
+            g = column_format([s for s in stats[:2] if s != round(s)] or [0.5])
+            cells = [g(stats[0]), g(stats[1])] + [f(x) for x in stats[2:]]
+        else:
+            cells = [f(x) for x in stats]
+        out.append(f"| {c} | {u} | {len(v)} | " + " | ".join(cells) + " |")
     return out
 
 
-def _rows_table(rows, params, cols):
-    head = ["case", "status", "wall_s", *params, *cols]
-    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+def _rows_table(rows, params, cols, names):
+    head = ["case", "status", *params, *cols]
+    fmts = {h: column_format([r.get(h) for r in rows]) for h in (*params, *cols)}
+    units = [names.unit(h) for h in head[2:]]
+    out = ["| " + " | ".join(head[:2] + [f"{h} [{u}]" if u not in NO_UNIT else h for h, u in zip(head[2:], units)])
+           + " |", "|" + "---|" * len(head)]
     for r in rows:
-        out.append("| " + " | ".join(_fmt(r.get(h)) if h not in ("case", "status") else
-                                     _fmt(r.get("case_id") if h == "case" else r.get("status")) for h in head) + " |")
+        out.append("| " + " | ".join([_fmt(r.get("case_id")), _fmt(r.get("status"))] +
+                                     [fmts[h](r.get(h)) if isinstance(r.get(h), float) else _fmt(r.get(h))
+                                      for h in head[2:]]) + " |")
     return out
 
 
-def write_report(outdir) -> Path:
-    """Write OUTDIR/report.md and the plots in OUTDIR/report/; returns the path of report.md."""
+def write_report(outdir, with_summary=False):
+    """Write OUTDIR/report.md and the plots in OUTDIR/report/; returns the path of report.md (and, with
+    `with_summary`, a dict: files, counts, probabilities of failure)."""
     outdir = Path(outdir)
     study = read_study(outdir)
     header, rows = read_results(outdir)
     if not study and not header:
         raise FileNotFoundError(f"{outdir}: no study.json or results.csv (run `cases study run` first)")
+    names = Names({**study, "name": study.get("name", outdir.name)})
     figdir = outdir / "report"
     figdir.mkdir(parents=True, exist_ok=True)
     params = [c for c in header if c.startswith("p:")]
-    cols = _result_columns(study, header, rows)
+    allcols = _result_columns(study, header, rows)
     ok_rows = [r for r in rows if r.get("status") == "ok"]
-    data = {c: _numeric(ok_rows, c) for c in cols}
+    tcols = [c for c in allcols if is_timing(c, names.units)]
+    cols = [c for c in allcols if c not in tcols]
+    data = {c: _numeric(ok_rows, c) for c in allcols}
     numeric = [c for c in cols if np.isfinite(data[c]).any()]
     num_params = [p for p in params if ok_rows and all(isinstance(r.get(p), float) for r in ok_rows)
                   and len({r[p] for r in ok_rows}) > 1]
     mc = is_monte_carlo(study, rows, params)
-    name = study.get("name", outdir.name)
+    name = names.study
+    info = {"report": str(outdir / "report.md"), "study": name, "figures": [],
+            "cases": {s: sum(1 for r in rows if r.get("status") == s) for s in ("ok", "failed", "timeout")},
+            "pof": {}}
     md = [f"# Study report: {name}", ""]
     if study.get("description"):
         md += [str(study["description"]), ""]
     md += ["## Summary", "", *_summary_lines(study, rows, outdir), ""]
+    units = [f"`{c}` {names.unit(c)}" for c in [*params, *numeric] if names.unit(c) not in NO_UNIT]
+    if units:
+        md += ["Units: " + ", ".join(units) + ".", ""]
+    errs = [c for c in numeric if c in ERRORS]
+    if errs:
+        md += ["Errors: " + "; ".join(f"`{c}` = {ERRORS[c][0]} ({ERRORS[c][1]})" for c in errs) + ".", ""]
     figures = 0
 
     def fig_line(path, caption):
+        info["figures"].append(str(path))
         return f"![{caption}](report/{path.name})"
 
+    p = plot_inputs(figdir / "inputs.png", study, rows, names)
+    if p is not None:
+        figures += 1
+        md += ["## Sampled inputs", "", "Orientations as poles on an equal-area net (lower hemisphere), other sampled "
+               "parameters as histograms.", "", fig_line(p, "sampled inputs"), ""]
     if mc:
         md += ["## Monte-Carlo results", "", f"{len(ok_rows)} cases ran (status ok).", ""]
         fs_cols = [c for c in numeric if FS_RE.match(c)]
@@ -476,6 +748,7 @@ def write_report(outdir) -> Path:
             for c in fs_cols:
                 pof, k, n = probability_of_failure(data[c])
                 lo, hi = wilson_interval(k, n)
+                info["pof"][c] = {"pof": pof, "failures": k, "cases": n, "wilson95": [lo, hi]}
                 md.append(f"| {c} | {k} | {n} | {pof:.4f} | {lo:.4f} - {hi:.4f} | "
                           f"{int(np.sum(~np.isfinite(data[c])))} |")
             if len(fs_cols) > 1:
@@ -483,25 +756,25 @@ def write_report(outdir) -> Path:
                 a, b = data[fs_cols[0]][both] < 1, data[fs_cols[1]][both] < 1
                 md += ["", f"Same verdict (both fail or both hold) in {int(np.sum(a == b))} of {int(both.sum())} "
                            f"cases where {fs_cols[0]} and {fs_cols[1]} are both defined."]
-            p = plot_distribution(figdir / "pof.png", fs_cols, data, fs=True)
+            p = plot_distribution(figdir / "pof.png", fs_cols, data, names, fs=True)
             figures += 1
             md += ["", fig_line(p, "probability of failure"), ""]
-        md += ["### Distributions", "", *_stats_table(numeric, data), ""]
+        md += ["### Distributions", "", *_stats_table(numeric, data, names), ""]
         for c in numeric:
             if c in fs_cols or figures >= MAX_PLOTS:
                 continue
             v = data[c][np.isfinite(data[c])]
             if len(v) < 2 or v.min() == v.max():
                 continue
-            p = plot_distribution(figdir / f"dist_{_slug(c)}.png", [c], data)
+            p = plot_distribution(figdir / f"dist_{_slug(c)}.png", [c], data, names)
             figures += 1
-            md += [f"**{c}**", "", fig_line(p, c), ""]
+            md += [f"**{c}**: {names.name(c)}", "", fig_line(p, c), ""]
     else:
         md += ["## Results", ""]
         if len(rows) <= MAX_TABLE_ROWS:
-            md += [*_rows_table(rows, params, numeric), ""]
+            md += [*_rows_table(rows, params, numeric, names), ""]
         else:
-            md += [*_stats_table(numeric, data), ""]
+            md += [*_stats_table(numeric, data, names), ""]
         if num_params and ok_rows:
             md += ["### Response surfaces", ""]
             use = num_params[:2]
@@ -509,16 +782,17 @@ def write_report(outdir) -> Path:
                 md += [f"More than two parameters vary; the plots use {', '.join(use)}.", ""]
             for c in numeric:
                 v = data[c][np.isfinite(data[c])]
-                if c in TIME_COLUMNS or figures >= MAX_PLOTS or v.min() == v.max():
-                    continue  # timings are in the speed-against-error plots; a constant needs no plot
-                p = plot_response(figdir / f"response_{_slug(c)}.png", c, use, data, ok_rows)
+                if figures >= MAX_PLOTS or v.min() == v.max():
+                    continue  # a constant needs no plot
+                p = plot_response(figdir / f"response_{_slug(c)}.png", c, use, data, ok_rows, names)
                 figures += 1
                 md += [fig_line(p, c), ""]
         err_cols = [c for c in numeric if c.startswith("error_")]
         if err_cols and ok_rows:
             tname = next((c for c in TIME_COLUMNS if c in data and np.isfinite(data[c]).all()), "wall_s")
             t = data[tname] if tname in data else _numeric(ok_rows, "wall_s")
-            labels = [", ".join(f"{p[2:].split('.')[-1]}={_fmt(r.get(p), 3)}" for p in params) or r.get("case_id", "")
+            labels = [", ".join(f"{p[2:].split('.')[-1]}={column_format(_numeric(ok_rows, p))(r.get(p))}"
+                                for p in params if isinstance(r.get(p), float)) or r.get("case_id", "")
                       for r in ok_rows]
             md += ["### Speed against error", "",
                    f"Time: `{tname}`" + (" (the evaluator's own timing of the computation)" if tname != "wall_s"
@@ -529,16 +803,23 @@ def write_report(outdir) -> Path:
                 front = pareto_front(t, e)
                 if not np.isfinite(e).any():
                     continue
-                p = plot_speed_error(figdir / f"speed_error_{_slug(c)}.png", c, t, data[c], front, labels, tname)
+                p = plot_speed_error(figdir / f"speed_error_{_slug(c)}.png", c, t, data[c], front, labels, tname,
+                                     names)
                 figures += 1
-                md += [f"**{c}**", "", fig_line(p, f"speed against {c}"), "",
-                       f"| case | {' | '.join(params)} | {tname} | {c} | Pareto |",
+                ft, fe = column_format(list(t)), column_format(list(data[c]))
+                fp = {q: column_format([r.get(q) for r in ok_rows]) for q in params}
+                md += [f"**{c}**: {names.name(c)}", "", fig_line(p, f"speed against {c}"), "",
+                       f"| case | {' | '.join(params)} | {tname} [s] | {c} | Pareto |",
                        "|" + "---|" * (len(params) + 4)]
                 for k in np.argsort(t):
                     r = ok_rows[k]
-                    md.append(f"| {r.get('case_id')} | " + " | ".join(_fmt(r.get(q)) for q in params) +
-                              f" | {_fmt(float(t[k]))} | {_fmt(float(data[c][k]))} | {'yes' if front[k] else ''} |")
+                    md.append(f"| {r.get('case_id')} | " + " | ".join(
+                        fp[q](r.get(q)) if isinstance(r.get(q), float) else _fmt(r.get(q)) for q in params) +
+                        f" | {ft(float(t[k]))} | {fe(float(data[c][k]))} | {'yes' if front[k] else ''} |")
                 md.append("")
+    md += ["## Timing", "", "Kept apart from the results: the runner's wall time of each case (with the process "
+           "start and one-off work) and the evaluator's own timings.", "", *_timing_lines(rows, ok_rows, tcols, names),
+           ""]
     bad = [r for r in rows if r.get("status") not in ("ok",)]
     md += ["## Failed cases", ""]
     if bad:
@@ -553,7 +834,7 @@ def write_report(outdir) -> Path:
     tmp = path.with_name(f".report.md.tmp{os.getpid()}")
     tmp.write_text("\n".join(md), encoding="utf-8")
     os.replace(tmp, path)
-    return path
+    return (path, info) if with_summary else path
 
 
 def main(argv=None):

@@ -41,13 +41,11 @@ from __future__ import annotations
 
 import argparse
 import copy
-import importlib
 import itertools
 import json
 import math
 import re
 import sys
-import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,103 +55,24 @@ import numpy as np
 from sgim.cli import EXIT_BAD_INPUT, CliError, _progress, run_command
 from sgim.scene import SceneError
 
-STUDY_KEYS = {"name", "description", "base", "engine", "results", "seed", "timeout", "parameters", "sampling"}
+from .evaluators import BUILTIN, Evaluator, _as_evaluator, _noop, _sleep, _spin, module_file, registry, \
+    resolve_evaluator  # noqa: F401 - re-exported
+
+STUDY_KEYS = {"name", "description", "base", "evaluator", "engine", "results", "units", "seed", "timeout",
+              "parameters", "sampling"}
+# the runner's own columns of results.csv (and the prefix of parameter columns): no result may take these names
+RESERVED = ("case_id", "status", "error", "wall_s", "rank", "attempt", "version")
 METHODS = ("grid", "random", "lhs", "realisations")
 AXIS_KINDS = ("grid", "list", "realisations")
 SAMPLED_KINDS = ("uniform", "normal", "fisher")
 PARAM_KINDS = AXIS_KINDS + SAMPLED_KINDS
 MAX_CASES = 1_000_000  # cases per study: each is a row of the table and usually an engine run
 MAX_TIMEOUT = 1e9  # s per case (30 years): a deadline beyond the platform's time_t overflowed the runner
+MAX_MEMORY_MB = 1e9  # --memory-limit [MB]
 
 
 # --------------------------------------------------------------------------------------------- evaluators
-@dataclass(frozen=True)
-class Evaluator:
-    """fn(scene_path: Path, case_dir: Path, params: dict) -> dict of scalars; needs: engine executables."""
-
-    fn: object
-    needs: tuple = ()
-    description: str = ""
-
-
-def _work(scene_path):
-    with open(scene_path, "rb") as fh:
-        return tomllib.load(fh).get("work", {})
-
-
-def _noop(scene_path, case_dir, params):
-    """Reads the scene, returns the sum of the numeric parameters (framework overhead)."""
-    _work(scene_path)
-    total = 0.0
-    for v in params.values():
-        if isinstance(v, (int, float)) and not isinstance(v, bool):
-            total += v
-    return {"value": total}
-
-
-def _sleep(scene_path, case_dir, params):
-    """Sleeps [work] seconds."""
-    s = float(_work(scene_path).get("seconds", 0.1))
-    time.sleep(s)
-    return {"value": s}
-
-
-def _spin(scene_path, case_dir, params):
-    """A fixed single-core numpy workload: [work] iterations x size elementwise steps (deterministic)."""
-    w = _work(scene_path)
-    n, size = int(w.get("iterations", 200)), int(w.get("size", 100_000))
-    x = np.linspace(0.0, 1.0, size) + float(w.get("offset", 0.0))
-    for _ in range(n):
-        x = np.sin(x) * 0.999 + 0.01 * np.cos(3.0 * x)
-    return {"value": float(x.sum())}
-
-
-BUILTIN = {
-    "noop": Evaluator(_noop, (), "no work: framework overhead"),
-    "sleep": Evaluator(_sleep, (), "sleeps [work] seconds"),
-    "spin": Evaluator(_spin, (), "fixed CPU workload ([work] iterations, size): scaling benchmark"),
-}
-
-
-def registry():
-    """Built-in evaluators merged with cases/evaluators.py EVALUATORS (when that module exists)."""
-    reg = dict(BUILTIN)
-    try:
-        mod = importlib.import_module("cases.evaluators")
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("cases.evaluators",):
-            raise
-        return reg
-    reg.update(getattr(mod, "EVALUATORS", {}))
-    return reg
-
-
-def _as_evaluator(obj):
-    if callable(obj) and not hasattr(obj, "fn"):
-        return Evaluator(obj)
-    return Evaluator(obj.fn, tuple(getattr(obj, "needs", ()) or ()), getattr(obj, "description", ""))
-
-
-def resolve_evaluator(name, study_dir=None):
-    """The Evaluator for `name`: a registry name or "module:attr" (study_dir on the import path). Raises
-    LookupError with a one-line reason."""
-    if ":" in name:
-        mod_name, _, attr = name.partition(":")
-        if study_dir is not None and str(study_dir) not in sys.path:
-            sys.path.insert(0, str(study_dir))
-        try:
-            mod = importlib.import_module(mod_name)
-        except ImportError as exc:
-            raise LookupError(f"cannot import module {mod_name!r} ({exc})") from None
-        if not hasattr(mod, attr):
-            raise LookupError(f"module {mod_name!r} has no {attr!r}")
-        return _as_evaluator(getattr(mod, attr))
-    reg = registry()
-    if name not in reg:
-        raise LookupError(f"unknown evaluator (known: {', '.join(sorted(reg))}; or 'module:function')")
-    return _as_evaluator(reg[name])
-
-
+# the registry lives in cases/evaluators.py (Evaluator, registry, resolve_evaluator; re-exported here)
 # --------------------------------------------------------------------------------------------- the study
 @dataclass
 class Param:
@@ -184,12 +103,43 @@ class Study:
     params: list
     cases: list = field(default_factory=list)
     needs: tuple = ()
+    units: dict = field(default_factory=dict)  # result or parameter -> unit (the evaluator's, then the study's)
+    files: list = field(default_factory=list)  # the files the base scene names (absolute paths)
+    description: str = ""
 
     def to_json(self):
-        return {"name": self.name, "study": str(self.path), "base": str(self.base), "engine": self.engine,
-                "results": list(self.results), "seed": self.seed, "timeout": self.timeout, "method": self.method,
-                "samples": self.samples, "parameters": {p.path: {p.kind: p.spec} for p in self.params},
+        return {"name": self.name, "description": self.description, "study": str(self.path),
+                "base": str(self.base), "evaluator": self.engine, "results": list(self.results), "seed": self.seed,
+                "timeout": self.timeout, "method": self.method, "samples": self.samples,
+                "parameters": {p.path: {p.kind: p.spec} for p in self.params}, "units": dict(self.units),
+                "fingerprint": self.fingerprint(),
                 "cases": [{"case_id": c.case_id, "params": c.params} for c in self.cases]}
+
+    def fingerprint(self):
+        """{what: sha256 of its bytes}: the study file, the base scene, every file the base scene names and the
+        evaluator's module source. A restart compares it with the one in OUTDIR/study.json."""
+        import hashlib
+
+        def digest(p):
+            try:
+                return hashlib.sha256(Path(p).read_bytes()).hexdigest()
+            except OSError:
+                return "unreadable"
+
+        out = {"study file": digest(self.path), "base scene": digest(self.base)}
+        for f in self.files:
+            try:
+                rel = Path(f).relative_to(self.base.parent).as_posix()
+            except ValueError:
+                rel = str(f)
+            out[f"file {rel}"] = digest(f)
+        try:
+            mod = module_file(resolve_evaluator(self.engine, self.path.parent.resolve()))
+        except LookupError:
+            mod = None
+        if mod is not None:
+            out[f"evaluator module {mod.name}"] = digest(mod)
+        return out
 
     def case_scene(self, case):
         """The base scene with the case's values substituted (a dict)."""
@@ -257,25 +207,29 @@ def _target(value):
     return "other"
 
 
-def _absolutise(scene, base_dir):
+def _absolutise(scene, base_dir, found=None):
     """String values naming a file next to the base scene become absolute paths (the case scene lives in
-    its own folder)."""
+    its own folder); the files go to `found`."""
+    found = [] if found is None else found
     if isinstance(scene, dict):
         items = scene.items()
     elif isinstance(scene, list):
         items = enumerate(scene)
     else:
-        return
+        return found
     for k, v in list(items):
         if isinstance(v, (dict, list)):
-            _absolutise(v, base_dir)
-        elif isinstance(v, str) and v and not Path(v).is_absolute() and len(v) < 4096:
-            cand = base_dir / v
+            _absolutise(v, base_dir, found)
+        elif isinstance(v, str) and v and len(v) < 4096:
+            cand = Path(v) if Path(v).is_absolute() else base_dir / v
             try:
                 if cand.is_file():
                     scene[k] = str(cand.resolve())
-            except OSError:
+                    if cand.resolve() not in found:
+                        found.append(cand.resolve())
+            except (OSError, ValueError):
                 pass
+    return found
 
 
 def load_study(path, check_engine=True) -> Study:
@@ -304,24 +258,36 @@ def load_study(path, check_engine=True) -> Study:
     base_rel = data["base"]
     if not isinstance(base_rel, str):
         err("base", base_rel, "must be a file name")
-    base = (path.parent / base_rel).resolve()
+    # relative to the folder of the study file itself (path.parent is absolute after resolve(): a study copied
+    # elsewhere, or run from another working folder, finds its scene beside it)
+    base = (path.resolve().parent / base_rel).resolve()
+    if not base.is_file():
+        near = path.resolve().parent / Path(base_rel).name
+        hint = f"; {near.name} is beside the study file: base = \"{near.name}\"?" if near.is_file() else ""
+        err("base", base_rel, f"no base scene {base} (relative paths are read from the study file's folder "
+                              f"{path.resolve().parent}){hint}")
     try:
         base_scene = tomllib.loads(base.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as exc:
         err("base", base_rel, f"cannot read the base scene {base} ({exc.__class__.__name__})")
     except tomllib.TOMLDecodeError as exc:
         err("base", base_rel, f"base scene is not valid TOML ({str(exc).splitlines()[0]})")
-    _absolutise(base_scene, base.parent)
+    files = _absolutise(base_scene, base.parent)
 
-    engine = data.get("engine")
+    if "engine" in data and "evaluator" in data:
+        err("engine", data["engine"], "give the evaluator once: `evaluator =` (engine is its former name)")
+    ekey = "engine" if "engine" in data else "evaluator"
+    engine = data.get(ekey)
     if not isinstance(engine, str) or not engine:
-        err("engine", engine, "missing or not a string (an evaluator name; see `cases study list --engines`)")
+        err("evaluator", engine, "missing or not a string (an evaluator name, see `cases study list --evaluators`, "
+                                 "or \"module:function\")")
     needs = ()
+    ev = None
     if check_engine:
         try:
-            ev = resolve_evaluator(engine, path.parent.resolve())
+            ev = resolve_evaluator(engine, path.resolve().parent)
         except LookupError as exc:
-            err("engine", engine, str(exc))
+            err(ekey, engine, str(exc))
         needs = ev.needs
         for exe in needs:
             from adapters.process import EngineError, find_engine
@@ -329,13 +295,22 @@ def load_study(path, check_engine=True) -> Study:
             try:
                 find_engine(exe)
             except EngineError as exc:
-                err("engine", engine, f"needs {exc}")
+                err(ekey, engine, f"needs {exc}")
 
     results = data.get("results", [])
     if not isinstance(results, list) or not all(isinstance(r, str) and r for r in results):
         err("results", results, "must be a list of result names")
     if len(set(results)) != len(results):
         err("results", results, "names must be unique")
+    for r in results:
+        if r in RESERVED or r.startswith("p:"):
+            err("results", r, f"reserved name: the table's own columns are {', '.join(RESERVED)} and p:<parameter> "
+                              "(rename the result, e.g. in the evaluator's returned dict)")
+        if any(ch in r for ch in ",\"\r\n") or r != r.strip() or len(r.splitlines()) != 1:
+            err("results", r, "a result name must be one line without commas or quotes")
+    units = data.get("units", {})
+    if not isinstance(units, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in units.items()):
+        err("units", units, 'must be a table of names and units, e.g. { fs = "-", "contact.kn" = "N/m" }')
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         err("seed", seed, "must be an integer >= 0")
@@ -388,9 +363,14 @@ def load_study(path, check_engine=True) -> Study:
     if total > MAX_CASES:
         err("parameters", f"{total} cases", f"more than {MAX_CASES} cases (the product of the axes"
                                            f"{' and the samples' if method in ('random', 'lhs') else ''})")
-    study = Study(path=path, name=name, base=base, base_scene=base_scene, engine=engine, results=results,
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        err("description", description, "must be a string")
+    all_units = {**(dict(ev.units) if ev is not None else {}), **units}
+    study = Study(path=path.resolve(), name=name, base=base, base_scene=base_scene, engine=engine, results=results,
                   seed=seed, timeout=float(timeout) if timeout is not None else None, method=method,
-                  samples=samples, params=params, needs=tuple(needs))
+                  samples=samples, params=params, needs=tuple(needs), units=all_units, files=files,
+                  description=description)
     study.cases = make_cases(study)
     return study
 
@@ -609,16 +589,44 @@ def dump_toml(data: dict) -> str:
 
 
 # --------------------------------------------------------------------------------------------- CLI
+def check_base(study):
+    """The base scene through the evaluator's own check (once, before any case runs): CliError, one line."""
+    ev = resolve_evaluator(study.engine, study.path.parent)
+    if ev.check is None:
+        return
+    try:
+        ev.check(study.base)
+    except SceneError as exc:
+        raise CliError(f"base scene {exc}") from None
+    except (CliError, ValueError, KeyError, TypeError, OSError, LookupError) as exc:
+        msg = str(exc).strip().splitlines()
+        raise CliError(f"base scene {study.base}: {msg[0] if msg else type(exc).__name__} (checked by evaluator "
+                       f"{study.engine} before any case runs)") from None
+
+
+def _options(args):
+    """--timeout and --memory-limit checked (CliError, one line): finite positive numbers."""
+    t = args.timeout
+    if t is not None and not (math.isfinite(t) and 0 < t <= MAX_TIMEOUT):
+        raise CliError(f"--timeout: {t!r}: must be a number of seconds in (0, {MAX_TIMEOUT:g}]")
+    m = args.memory_limit
+    if m is not None and not (math.isfinite(m) and 16 <= m <= MAX_MEMORY_MB):
+        raise CliError(f"--memory-limit: {m!r}: must be a number of MB per case in [16, {MAX_MEMORY_MB:g}]")
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"{out}: -o = {str(out)!r}: output exists and is not a folder")
+
+
 def cmd_run(args):
     from ._batch import run_study, world
 
     comm = world()
     rank = comm.rank if comm is not None else 0
-    say = _progress(args.quiet or rank != 0)
+    say = _progress(args.quiet or args.json or rank != 0)
     try:
+        _options(args)
         study = load_study(args.study)
-        if args.timeout is not None and not 0 < args.timeout <= MAX_TIMEOUT:
-            raise CliError(f"--timeout: {args.timeout!r}: must be in (0, {MAX_TIMEOUT:g}] seconds")
+        check_base(study)
     except (SceneError, CliError) as exc:
         if comm is None:
             raise
@@ -627,9 +635,14 @@ def cmd_run(args):
         comm.Barrier()
         return EXIT_BAD_INPUT
     summary = run_study(study, Path(args.output), timeout=args.timeout, comm=comm, progress=say,
-                        retry_failed=args.retry_failed, force=args.force)
-    if rank == 0 and not args.quiet:
-        f = summary
+                        retry_failed=args.retry_failed, force=args.force, new_version=args.new_version,
+                        memory_mb=args.memory_limit)
+    if rank != 0:
+        return 0
+    f = summary
+    if args.json:
+        print(json.dumps(summary, indent=1))
+    elif not args.quiet:
         print(f"{f['outdir']}/results.csv: {f['done']}/{f['total']} cases ({f['ok']} ok, {f['failed']} failed, "
               f"{f['timeout']} timeout), {f['ran']} run now on {f['ranks']} rank(s) in {f['wall_s']:.2f} s")
     return 0
@@ -638,17 +651,17 @@ def cmd_run(args):
 def cmd_list(args):
     if args.engines:
         for name, ev in sorted(registry().items()):
-            ev = _as_evaluator(ev)
             needs = f" (needs {', '.join(ev.needs)})" if ev.needs else ""
             print(f"{name:24s} {ev.description}{needs}")
         return 0
     if not args.study:
-        raise CliError("study list: give a STUDY file (or --engines)")
+        raise CliError("study list: give a STUDY file (or --evaluators)")
     study = load_study(args.study)
     if args.json:
         print(json.dumps(study.to_json(), indent=2))
         return 0
-    print(f"{study.name}: {len(study.cases)} cases, engine {study.engine}, method {study.method}, seed {study.seed}")
+    print(f"{study.name}: {len(study.cases)} cases, evaluator {study.engine}, method {study.method}, "
+          f"seed {study.seed}")
     for c in study.cases:
         print(f"  {c.case_id}  {json.dumps(c.params)}")
     return 0
@@ -658,36 +671,50 @@ def cmd_report(args):
     out = Path(args.outdir)
     if not (out / "study.json").is_file():
         raise CliError(f"{out}: OUTDIR = {str(out)!r}: no study.json (not a study output folder)")
-    try:
-        from .report import write_report
-    except ModuleNotFoundError as exc:
-        if exc.name != "cases.report":
-            raise
-        raise CliError("study report: cases/report.py is not available") from None
-    path = write_report(out)
-    print(path)
+    from .report import write_report
+
+    path, info = write_report(out, with_summary=True)
+    if args.json:
+        print(json.dumps(info, indent=1))
+    else:
+        print(path)
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """Bad options in one line (``cases study: error: ...``) and exit status 2."""
+
+    def error(self, message):
+        print(f"cases study: error: {self.prog.removeprefix('cases study').strip() or 'study'}: {message} "
+              f"(see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
 def make_parser():
-    ap = argparse.ArgumentParser(prog="cases study", description="Batch studies (serial, or under mpirun).")
-    sub = ap.add_subparsers(dest="cmd", required=True)
+    ap = _Parser(prog="cases study", description="Batch studies (serial, or under mpirun).")
+    sub = ap.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
     r = sub.add_parser("run", help="run a study (under mpirun: rank 0 hands out cases to all ranks)")
-    r.add_argument("study")
+    r.add_argument("study", help="the study file (TOML)")
     r.add_argument("-o", "--output", required=True, help="output folder (a restart skips finished cases)")
     r.add_argument("--timeout", type=float, default=None, help="per-case time limit [s] (overrides the study)")
+    r.add_argument("--memory-limit", type=float, default=None, metavar="MB",
+                   help="address-space limit of each case [MB] (RLIMIT_AS); a case past it fails with that reason")
     r.add_argument("--retry-failed", action="store_true", help="run failed and timed-out cases again")
     r.add_argument("--force", action="store_true", help="replace a different study's output in the folder (its "
                    "own files only; files added by hand stay); the same study is resumed with or without it")
-    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--new-version", action="store_true", help="the study's inputs changed (fingerprint): move the "
+                   "earlier tables and cases to OUTDIR/versions/vN/ and run every case again")
+    r.add_argument("--quiet", action="store_true", help="no progress lines")
+    r.add_argument("--json", action="store_true", help="print the run's summary as JSON on stdout")
     r.set_defaults(func=cmd_run)
     ls = sub.add_parser("list", help="the cases of a study (nothing is run)")
-    ls.add_argument("study", nargs="?")
-    ls.add_argument("--json", action="store_true")
-    ls.add_argument("--engines", action="store_true", help="list the evaluators")
+    ls.add_argument("study", nargs="?", help="the study file (TOML)")
+    ls.add_argument("--json", action="store_true", help="the study and its cases as JSON on stdout")
+    ls.add_argument("--evaluators", "--engines", dest="engines", action="store_true", help="list the evaluators")
     ls.set_defaults(func=cmd_list)
     rp = sub.add_parser("report", help="Markdown report with plots of a study's results")
-    rp.add_argument("outdir")
+    rp.add_argument("outdir", help="the study's output folder")
+    rp.add_argument("--json", action="store_true", help="print the report's summary (files, counts, PoF) as JSON")
     rp.set_defaults(func=cmd_report)
     return ap
 
