@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 
-from sgim.cli import FORCE_HELP, CliError, _progress, positive_int, run_command
+from sgim.cli import FORCE_HELP, CliError, _progress, add_version, positive_int, run_command
 
 EXIT_ENGINE = 3
 
@@ -54,8 +54,8 @@ def cmd_run(args):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="adapters", description="Export sphere models and block scenes to YADE and "
-                                 "LIGGGHTS decks, run them, read their results back.")
+    ap = add_version(argparse.ArgumentParser(prog="adapters", description="Export sphere models and block scenes to "
+                                             "YADE and LIGGGHTS decks, run them, read their results back."))
     sub = ap.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("export", help="write a deck folder for an engine (or a text / VTU export)")
     p.add_argument("source", help="DDA scene (.toml with [spheres], or blocks for yade), sgim scene .toml, "

@@ -16,9 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import FORCE_HELP, CliError, _progress, output_folder, positive_int, run_command  # sgim's CLI conventions
+from sgim.cli import FORCE_HELP, CliError, _progress, add_version, output_folder, positive_int, run_command  # sgim's CLI conventions
 from sgim.machine import machine_info
 
+from .answers import Answers, default_reports, format_answer
+from .plots import plot_series
 from .results import ENERGY_COLUMNS
 
 EXIT_BLOWUP = 3
@@ -36,6 +38,8 @@ def _write_outputs(scene, sim, res, tmp, frames, summary, say, out):
     if "vtu" in scene.formats and frames:
         write_pvd(frames, tmp / "blocks.pvd")
     if "png" in scene.formats:
+        plot_series(tmp / "series.png", scene.name, res.time, res.energy,
+                    [("blocks", res.positions, res.velocities, ~np.asarray(res.fixed, bool))])
         render_png(sim, tmp / "final.png", scene.width, scene.height, title=scene.name)
         if say:
             say(f"render     {out / 'final.png'}")
@@ -50,14 +54,16 @@ def _run_frames(sim, scene, say, frame, append):
     """Run `sim` for the scene's duration in `scene.frames` pieces, calling `frame()` before the first and after
     each piece; `append(res, r)` merges a piece's results into the run's. Returns (results, status, message):
     on a blow-up the results so far, "blow-up" and its message."""
+    from .progress import RunProgress
     from .simulation import BlowUpError
 
     frame()
     piece = scene.duration / scene.frames
+    clock = RunProgress(say, sim.time + scene.duration, sim.time, sim.steps)  # percent and ETA of the whole run
     status, message, res = "ok", "", None
     for _ in range(scene.frames):
         try:
-            r = sim.run(piece, record_every=min(scene.record_every, piece), progress=say)
+            r = sim.run(piece, record_every=min(scene.record_every, piece), progress=clock)
         except BlowUpError as exc:
             status, message, r = "blow-up", str(exc), exc.results
         if res is None:
@@ -125,6 +131,7 @@ def _run_spheres(scene, out, dest, args, say, t0):
 
     ss, sim = scene.build_spheres(max_steps=positive_int(args.max_steps, "--max-steps"))  # step limit: SceneError
     colour = _model_colour(scene.spheres["model"], ss.n)
+    answers = Answers(scene.reports or default_reports(True), sim, spheres=True)
     if say:
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
             f"{ss.n_joints} smooth joints, {len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
@@ -178,15 +185,22 @@ def _run_spheres(scene, out, dest, args, say, t0):
             "dt_critical": sim.dt_crit, "steps": sim.steps, "time": sim.time,
             "wall_s": round(time.perf_counter() - t0, 3),
             "energy_final": dict(zip(ENERGY_COLUMNS, [float(x) for x in e])),
+            "answers": answers.finish(sim, e[-1]),
             "machine": machine_info(),
         }
+        if "png" in scene.formats:
+            bodies = [("spheres", res.pos, res.vel, ~(ss.fixed | ss.prescribed))]
+            if res.block_pos:
+                bodies.append(("blocks", res.block_pos, None, ~np.asarray(sim.blocks.A.fixed, bool)))
+            plot_series(tmp / "series.png", scene.name, res.time, res.energy, bodies)
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2))
     if status != "ok":
         print(f"dda: error: {message} (last good state written to {out})", file=sys.stderr)
         return EXIT_BLOWUP
-    if not args.quiet:
+    if not args.quiet and not args.json:
         print(f"{out}: {ss.n} spheres, {sim.steps} steps to t = {sim.time:.4g} s in {summary['wall_s']:.2f} s, "
               f"{summary['bonds_intact']} of {ss.n_bonds} bonds intact")
+    _print_answers(summary, args)
     return 0
 
 
@@ -206,6 +220,7 @@ def cmd_run(args):
     if say:
         say(f"scene      {scene.name}: {bs.n_blocks} blocks ({len(sim.active)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s), {int(round(scene.duration / sim.dt))} steps")
+    answers = Answers(scene.reports or default_reports(False), sim)  # the initial state the answers start from
     with dest.assemble() as tmp:
         frames = []
         want_vtu = "vtu" in scene.formats
@@ -226,25 +241,38 @@ def cmd_run(args):
             "steps": sim.steps, "time": sim.time, "wall_s": round(time.perf_counter() - t0, 3),
             "energy_final": dict(zip(ENERGY_COLUMNS, [float(x) for x in res.energies[-1]])),
             "contacts_final": int(sim.stats[5]), "points_final": int(sim.stats[6]),
+            "answers": answers.finish(sim, res.energies[-1][-1]),
             "machine": machine_info(),
         }
         _write_outputs(scene, sim, res, tmp, frames, summary, say, out)
     if status != "ok":
         print(f"dda: error: {message} (last good state written to {out})", file=sys.stderr)
         return EXIT_BLOWUP
-    if not args.quiet:
+    if not args.quiet and not args.json:
         print(f"{out}: {bs.n_blocks} blocks, {sim.steps} steps to t = {sim.time:.4g} s in {summary['wall_s']:.2f} s "
               f"(energy balance error {summary['energy_final']['balance_error']:.3g} J)")
+    _print_answers(summary, args)
     return 0
 
 
+def _print_answers(summary, args):
+    """The run's answers, one line each (stdout), or the summary as JSON with --json."""
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return
+    if not args.quiet:
+        for a in summary["answers"]:
+            print(f"  {format_answer(a)}")
+
+
 def make_parser():
-    p = argparse.ArgumentParser(prog="dda", description="Explicit 3D DDA for convex blocks")
+    p = add_version(argparse.ArgumentParser(prog="dda", description="Explicit 3D DDA for convex blocks"))
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run a DDA scene")
     r.add_argument("scene")
     r.add_argument("-o", "--output", required=True, help="output folder")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
+    r.add_argument("--json", action="store_true", help="print summary.json (with the answers) to stdout")
     r.add_argument("--force", action="store_true", help=FORCE_HELP)
     r.add_argument("--max-steps", metavar="N", help="refuse a run of more than N steps (duration / dt; overrides "
                                                     "the scene's [simulation] max_steps, default 1e8)")

@@ -5,7 +5,7 @@ body principal frame -> world), ``vel`` (r, n, 3), ``energy`` (r, 7) with column
 ``contacts`` / ``points`` / ``sliding`` (r,) counts, ``names`` (n,), ``fixed`` (n,), ``mass`` (n,); with
 deformable blocks also ``strain`` (r, n, 6) body-frame strains (ex, ey, ez, gyz, gzx, gxy).
 ``series.csv``: one row per record with time, the energy columns, the counts, and the mean displacement of
-the moving blocks (``save_sphere_csv``: the columns of a run with spheres). ``final.npz``: the final state (pos, quat, vel, angmom, world vertices, contact points;
+the moving blocks, each column name ending in its unit (``time_s``, ``kinetic_J``, ``mean_displacement_m``) (``save_sphere_csv``: the columns of a run with spheres). ``final.npz``: the final state (pos, quat, vel, angmom, world vertices, contact points;
 ``strain`` (n, 6) and ``dof`` with deformable blocks).
 """
 from __future__ import annotations
@@ -17,6 +17,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 ENERGY_COLUMNS = ("kinetic", "potential", "elastic", "friction", "damping", "local_damping", "balance_error")
+# series.csv: the unit of each column as a suffix of its name (counts have none)
+CSV_UNITS = {"time": "s", **{c: "J" for c in ENERGY_COLUMNS}, "mean_displacement": "m",
+             "mean_block_displacement": "m"}
+
+
+def csv_header(columns):
+    """Column names with their units: time_s, kinetic_J, ..., mean_displacement_m; counts stay bare."""
+    return [f"{c}_{CSV_UNITS[c]}" if c in CSV_UNITS else c for c in columns]
 
 
 @dataclass
@@ -98,7 +106,7 @@ class Results:
         moving = ~self.fixed
         with open(tmp, "w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(["time", *ENERGY_COLUMNS, "contacts", "points", "sliding", "mean_displacement"])
+            w.writerow(csv_header(["time", *ENERGY_COLUMNS, "contacts", "points", "sliding", "mean_displacement"]))
             for r in range(len(self.time)):
                 disp = float(np.linalg.norm(pos[r, moving] - pos[0, moving], axis=1).mean()) if moving.any() else 0.0
                 w.writerow([repr(float(self.time[r])), *[repr(float(x)) for x in self.energy[r]],
@@ -123,8 +131,8 @@ def save_sphere_csv(res, path, fixed, block_fixed=None):
     bpos = np.asarray(res.block_pos)
     with open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["time", *ENERGY_COLUMNS, "contacts", "wall_contacts", "bonds", "mean_displacement",
-                    *(["mean_block_displacement"] if res.block_pos else [])])
+        w.writerow(csv_header(["time", *ENERGY_COLUMNS, "contacts", "wall_contacts", "bonds", "mean_displacement",
+                               *(["mean_block_displacement"] if res.block_pos else [])]))
         bdisp = None
         if res.block_pos:
             moving = np.ones(bpos.shape[1], bool) if block_fixed is None else ~np.asarray(block_fixed, bool)

@@ -40,6 +40,9 @@ written. Keys::
                    error; only the model's bonded pairs get bonds; [contact] is the sphere contact law (sphere-sphere,
                    sphere-block and, with [[contact_pair]], block-block); blocks are fixed walls or moving
                    blocks stepped in one loop with the spheres (see dda/spheres.py, dda/_coupled.py)
+    [[report]]     quantity (displacement, velocity, rotation, shortening, max_displacement, moved,
+                   bonds_broken, detached, energy_error), block or region, component, reference, label: the
+                   answers the run states at its end and in summary.json (dda/answers.py)
     [output]       formats = ["npz", "csv", "vtu", "png"]
     [render]       width = 1600, height = 1100
 """
@@ -62,6 +65,7 @@ OUTPUT_FORMATS = ("npz", "csv", "vtu", "png")
 TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact_pair", "block", "generate",
             "output", "render", "load", "spheres"}
 TOP_KEYS |= {"limits"}  # [limits] max_steps: the same as [simulation] max_steps (dda/limits.py)
+TOP_KEYS |= {"report"}  # [[report]]: the answers the run states (dda/answers.py)
 SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", "bond_shear_ratio", "bond_tensile",
                "bond_shear", "bond_damping", "bond_radius_factor", "joint_friction", "smooth_joints", "fixed_below"}
 SPHERE_KEYS |= {"load"}  # [[spheres.load]]: loaded regions (constant force or prescribed velocity)
@@ -110,6 +114,7 @@ class DDAScene:
     spheres: dict = field(default_factory=dict)  # [spheres]: model path, density, BondLaw, fixed regions
     max_steps: int | None = None  # [simulation] max_steps or [limits] max_steps (None: dda.limits default)
     max_steps_key: str = "simulation.max_steps"
+    reports: list = field(default_factory=list)  # [[report]]: dda.answers.Report (empty: the default answers)
 
     def build_spheres(self, max_steps=None, duration=None):
         """SphereSet and SphereSimulation of a scene with [spheres] (its blocks are fixed walls).
@@ -254,10 +259,24 @@ def sphere_load_arrays(loads, centers, fixed):
     return force, prescribed, velocity
 
 
-def _read_sphere_loads(rd, raw, centers, fixed):
-    """[[spheres.load]] tables: parsed, and checked on the model's spheres."""
+def read_region_cuts(rd, value, key):
+    """A sphere region: "z>2.6" or a list of such cuts, all of which must hold -> [(axis, sign, value), ...]."""
     from sgim.scene import parse_cut
 
+    exprs = [value] if isinstance(value, str) else value
+    if not isinstance(exprs, list) or not exprs:
+        rd.err(key, value, 'must be a string like "z>2.6" or a list of them (all must hold)')
+    cuts = []
+    for e in exprs:
+        try:
+            cuts.append(parse_cut(e))
+        except ValueError as exc:
+            rd.err(key, e, str(exc))
+    return cuts
+
+
+def _read_sphere_loads(rd, raw, centers, fixed):
+    """[[spheres.load]] tables: parsed, and checked on the model's spheres."""
     if not isinstance(raw, list) or any(not isinstance(t, dict) for t in raw):
         rd.err("spheres.load", raw, "must be an array of tables ([[spheres.load]])")
     loads = []
@@ -272,17 +291,7 @@ def _read_sphere_loads(rd, raw, centers, fixed):
             rd.err(key, sorted(lt), "give exactly one of: force = [fx, fy, fz] (N on each sphere), "
                                     "velocity = [vx, vy, vz] (m/s, prescribed)")
         if where[0] == "region":
-            v = lt["region"]
-            exprs = [v] if isinstance(v, str) else v
-            if not isinstance(exprs, list) or not exprs:
-                rd.err(f"{key}.region", v, 'must be a string like "z>2.6" or a list of them (all must hold)')
-            cuts = []
-            for e in exprs:
-                try:
-                    cuts.append(parse_cut(e))
-                except ValueError as exc:
-                    rd.err(f"{key}.region", e, str(exc))
-            region = ("region", cuts)
+            region = ("region", read_region_cuts(rd, lt["region"], f"{key}.region"))
         else:
             from sgim.geometry import dip_to_normal
 
@@ -575,6 +584,9 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         point = rd.vector(lt, "point", f"{key}.point", **COORD) if "point" in lt else None
         loads.append((names[bname], point, force))
 
+    from .answers import read_reports
+
+    reports = read_reports(rd, data, [b.name for b in blocks], bool(spheres))
     ot = rd.table(data, "output", "output")
     rd.known(ot, {"formats"}, "output")
     formats = ot.get("formats", list(OUTPUT_FORMATS))
@@ -588,7 +600,8 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         record_every=record_every, frames=frames, formats=tuple(formats),
         width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
         height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources,
-        loads=loads, sleep=sleep, spheres=spheres, max_steps=max_steps, max_steps_key=max_steps_key)
+        loads=loads, sleep=sleep, spheres=spheres, max_steps=max_steps, max_steps_key=max_steps_key,
+        reports=reports)
 
 
 def _max_steps(rd, data, st):

@@ -56,6 +56,7 @@ from sgim.portable import det3, matmul, norm
 from . import _integrate as _it
 from ._broad import LARGE, build_grid, buckets_for, map_cells, n_cells
 from ._fcp import MAXP
+from .progress import tracker
 from .results import Results
 
 def _quat_to_matrix(q):
@@ -318,10 +319,11 @@ class Simulation:
     def n_asleep(self):
         return int(self.asleep.sum())
 
-    def run(self, duration, record_every=None, progress=None, chunk_seconds=1.0) -> Results:
+    def run(self, duration, record_every=None, progress=None) -> Results:
         """Advance by `duration` seconds; record every `record_every` seconds (default duration / 100).
 
-        `progress(msg)` receives a line after each chunk (at most about one per `chunk_seconds` of wall time).
+        `progress`: a line printer (`progress(msg)`, at most about one line a second: simulated time, steps/s,
+        ETA, contacts, energy) or the dda.progress.RunProgress of a run made of several calls.
         Raises BlowUpError (with the results up to the last good state) when the run becomes unstable."""
         nsteps = max(1, int(round(duration / self.dt)))
         rec_steps = max(1, int(round((record_every or duration / 100) / self.dt)))
@@ -329,7 +331,7 @@ class Simulation:
         res.record(self)  # state before the first step (its energy is known after the first step)
         left = nsteps
         t_wall = time.perf_counter()
-        last_say = t_wall
+        clock = tracker(progress, self, duration)
         scale = 0.0
         first = self.E0 is None
         while left > 0:
@@ -362,13 +364,8 @@ class Simulation:
                 if left > 0 and self.steps % rec_steps:
                     continue
             res.record(self)
-            now = time.perf_counter()
-            if progress and (now - last_say >= chunk_seconds or left == 0):
-                last_say = now
-                done = nsteps - left
-                progress(f"t = {self.time:.4g} s  step {self.steps}  ({100.0 * done / nsteps:5.1f} %)  "
-                         f"contacts {int(self.stats[5])}  points {int(self.stats[6])}  "
-                         f"KE {e[0]:.4g} J  balance error {err:.3g} J  {done / max(now - t_wall, 1e-9):.0f} steps/s")
+            clock.update(self.time, self.steps, f"contacts {int(self.stats[5])}  points {int(self.stats[6])}  "
+                         f"KE {e[0]:.4g} J  balance error {err:.3g} J", end=left == 0)
         res.wall_s = time.perf_counter() - t_wall
         return res
 

@@ -68,6 +68,7 @@ import numpy as np
 from sgim.portable import matmul
 
 from . import _spheres as _sp
+from .progress import tracker
 from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
 from .simulation import BlowUpError, ContactLaw
 
@@ -595,8 +596,9 @@ class SphereSimulation:
         res.wall_contacts.append(int(self.stats[1]))
         res.bonds.append(int(self.bond_intact.sum()))
 
-    def run(self, duration, record_every=None, progress=None, chunk_seconds=1.0) -> SphereResults:
-        """Advance by `duration` seconds, recording every `record_every` seconds (default duration / 100).
+    def run(self, duration, record_every=None, progress=None) -> SphereResults:
+        """Advance by `duration` seconds, recording every `record_every` seconds (default duration / 100);
+        `progress` as for dda.simulation.Simulation.run.
 
         Raises BlowUpError (with the results so far) on a non-finite state."""
         nsteps = max(1, int(round(duration / self.dt)))
@@ -605,7 +607,7 @@ class SphereSimulation:
         if self.E0 is None:
             self._record(res)
         t_wall = time.perf_counter()
-        last = t_wall
+        clock = tracker(progress, self, duration)
         left = nsteps
         while left > 0:
             n = 1 if self.E0 is None else min(rec - (self.steps % rec), left)
@@ -620,12 +622,9 @@ class SphereSimulation:
                 raise BlowUpError(f"blow-up near t = {self.time:.6g} s (step {self.steps}): non-finite state; "
                                   f"dt = {self.dt:.3g} s (critical {self.dt_crit:.3g} s)", res)
             self._record(res)
-            now = time.perf_counter()
-            if progress and (now - last >= chunk_seconds or left == 0):
-                last = now
-                progress(f"t = {self.time:.4g} s  step {self.steps}  ({100.0 * (nsteps - left) / nsteps:5.1f} %)  "
-                         f"contacts {int(self.stats[0])}  {'block' if self.blocks is not None else 'wall'} "
-                         f"{int(self.stats[1])}  bonds {int(self.stats[2])}")
+            clock.update(self.time, self.steps, f"contacts {int(self.stats[0])}  "
+                         f"{'block' if self.blocks is not None else 'wall'} {int(self.stats[1])}  "
+                         f"bonds {int(self.stats[2])}", end=left == 0)
         res.wall_s = time.perf_counter() - t_wall
         return res
 

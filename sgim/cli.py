@@ -236,7 +236,8 @@ def _num(v, fmt):
 
 
 def make_parser():
-    p = argparse.ArgumentParser(prog="sgim", description="Sphere generator for irregular geological models")
+    p = add_version(argparse.ArgumentParser(prog="sgim", description="Sphere generator for irregular geological "
+                                                                     "models"))
     sub = p.add_subparsers(dest="cmd", required=True)
     b = sub.add_parser("build", help="build a sphere model from a scene file")
     b.add_argument("scene")
@@ -271,6 +272,18 @@ def make_parser():
     f.add_argument("--force", action="store_true", help=FORCE_HELP)
     f.set_defaults(func=cmd_dfn)
     return p
+
+
+def add_version(parser):
+    """``--version`` on every tool of the project: the rockdem distribution's version."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        v = version("rockdem")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        v = "(not installed)"
+    parser.add_argument("--version", action="version", version=f"%(prog)s (rockdem {v})")
+    return parser
 
 
 def run_command(prog, args, bad_input=()):

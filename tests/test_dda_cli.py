@@ -58,7 +58,7 @@ def test_run_writes_series_final_state_and_vtu(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "ok" and summary["blocks"] == 2
     rows = (out / "series.csv").read_text().splitlines()
-    assert rows[0].startswith("time,kinetic,potential") and len(rows) == len(s["time"]) + 1
+    assert rows[0].startswith("time_s,kinetic_J,potential_J") and len(rows) == len(s["time"]) + 1
 
 
 @pytest.mark.parametrize("edit,key", [
@@ -250,8 +250,8 @@ def test_sphere_scene_writes_a_frame_series_pvd_csv_and_png(tmp_path, moving):
     import csv
 
     rows = list(csv.reader((out / "series.csv").open()))
-    assert rows[0][:2] == ["time", "kinetic"] and len(rows) == len(s["time"]) + 1
+    assert rows[0][:2] == ["time_s", "kinetic_J"] and len(rows) == len(s["time"]) + 1
     assert [float(r[0]) for r in rows[1:]] == pytest.approx(s["time"].tolist(), abs=1e-12)
     free = s["pos"][:, ~s["fixed"]]
     disp = np.array([np.mean([np.linalg.norm(p[i] - free[0][i]) for i in range(free.shape[1])]) for p in free])
-    assert [float(r[rows[0].index("mean_displacement")]) for r in rows[1:]] == pytest.approx(disp, abs=1e-12)
+    assert [float(r[rows[0].index("mean_displacement_m")]) for r in rows[1:]] == pytest.approx(disp, abs=1e-12)
