@@ -397,8 +397,15 @@ def _generator_types(rd, fn, params, key):
     import inspect
 
     sig = inspect.signature(fn).parameters
+    allowed = [p for p, s in sig.items() if s.kind in (s.POSITIONAL_OR_KEYWORD, s.KEYWORD_ONLY)]
     for p, v in params.items():
-        d = sig[p].default if p in sig else None
+        if p not in allowed:
+            import difflib
+
+            near = difflib.get_close_matches(p, allowed, n=1)
+            rd.err(f"{key}.{p}", v, (f"unknown parameter (did you mean {near[0]!r}?); " if near else
+                                     "unknown parameter; ") + f"{fn.__name__} takes: {', '.join(allowed)}")
+        d = sig[p].default
         num = isinstance(v, (int, float)) and not isinstance(v, bool)
         if isinstance(d, bool):
             if not isinstance(v, bool):

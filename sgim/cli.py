@@ -200,23 +200,27 @@ def cmd_info(args):
     if pk.get("kind") == "random":  # sgim/rpack.py statistics
         st = _table(pk, "statistics")
         les = _table(st, "largest_empty_sphere")
-        print(f"packing    random  r = {st.get('radius_min', '?')} .. {st.get('radius_max', '?')}  density "
+        print(f"packing    random  r = {_num(st.get('radius_min'), '.6g')} .. {_num(st.get('radius_max'), '.6g')} m  "
+              f"density "
               f"{_num(st.get('density'), '.4f')}  coordination {_num(st.get('coordination'), '.3f')}  "
               f"max overlap {_num(st.get('max_overlap'), '.1e')}  largest empty sphere "
-              f"{_num(les.get('radius'), '.4g')} ({_num(les.get('relative_max'), '.3f')} x local r)")
+              f"{_num(les.get('radius'), '.4g')} m ({_num(les.get('relative_max'), '.3f')} x local r)")
     else:
-        print(f"packing    {pk.get('kind', '?')}  r = {pk.get('radius', '?')}  lattice sites {pk.get('lattice_sites', '?')}")
+        print(f"packing    {pk.get('kind', '?')}  r = {_num(pk.get('radius'), '.6g')} m  lattice sites "
+              f"{pk.get('lattice_sites', '?')}")
     print(f"spheres    {c['spheres']}  intact {c['intact']}  red {c['red']}  green {c['green']}  blue {c['blue']}")
     print(f"contacts   {c['bonds']}  bonded {c['bonded']}  cut {c['cut']}  (rule {_table(m, 'bonds').get('rule', '?')})")
     print(f"discs      {c['discontinuities']}  memberships {c['memberships']}")
     for k, name in enumerate(model.disc_name):
         kind = "fault" if model.disc_thickness[k] > 0 else "joint"
-        print(f"  [{k}] {name} ({kind}, R = {model.disc_radius[k]:g}, d = {model.disc_thickness[k]:g})")
+        print(f"  [{k}] {name} ({kind}, radius {model.disc_radius[k]:g} m"
+              + (f", thickness {model.disc_thickness[k]:g} m)" if kind == "fault" else ", zero thickness)"))
     srf = model.surfaces
     for q, k in enumerate(srf.get("surf_index", [])):
         d = float(srf["surf_thickness"][q])
         nf = int(srf["surf_face_start"][q + 1] - srf["surf_face_start"][q])
-        print(f"  [{k}] {srf['surf_name'][q]} ({'fault' if d > 0 else 'joint'}, surface of {nf} triangles, d = {d:g})")
+        print(f"  [{k}] {srf['surf_name'][q]} ({'fault' if d > 0 else 'joint'}, surface of {nf} triangles, "
+              + (f"thickness {d:g} m)" if d > 0 else "zero thickness)"))
     cavities = m.get("cavities")
     for c in cavities if isinstance(cavities, list) else []:
         c = c if isinstance(c, dict) else {}

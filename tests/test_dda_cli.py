@@ -255,3 +255,16 @@ def test_sphere_scene_writes_a_frame_series_pvd_csv_and_png(tmp_path, moving):
     free = s["pos"][:, ~s["fixed"]]
     disp = np.array([np.mean([np.linalg.norm(p[i] - free[0][i]) for i in range(free.shape[1])]) for p in free])
     assert [float(r[rows[0].index("mean_displacement_m")]) for r in rows[1:]] == pytest.approx(disp, abs=1e-12)
+
+
+def test_a_generator_parameter_typo_names_the_allowed_parameters(tmp_path, capsys):
+    import inspect
+
+    from dda.generate import GENERATORS
+
+    scene = _write(tmp_path, 'name = "x"\n[simulation]\nduration = 1\n[contact]\nkn = 1e9\n'
+                             '[[generate]]\nkind = "incline"\nangel = 30\n')
+    assert main(["run", str(scene), "-o", str(tmp_path / "out")]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "generate[0].angel = 30" in line and "did you mean 'angle'" in line and "unexpected keyword" not in line
+    assert line.endswith(", ".join(inspect.signature(GENERATORS["incline"]).parameters))

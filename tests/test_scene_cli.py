@@ -247,6 +247,12 @@ def test_info(built):
     assert spheres.split() == ["spheres", str(len(z["centers"])), "intact", str(cc[0]), "red", str(cc[1]),
                                "green", str(cc[2]), "blue", str(cc[3])]
     assert "joint" in res.stdout and "fault" in res.stdout
+    # lengths with units and a readable precision: "r = 0.5 m", "radius 40 m, thickness 2 m"
+    packing = next(line for line in res.stdout.splitlines() if line.startswith("packing"))
+    r = float(packing.split("r = ")[1].split()[0])
+    assert packing.split("r = ")[1].split()[1] == "m" and len(repr(r)) <= 9
+    fault = next(line for line in res.stdout.splitlines() if "(fault" in line)
+    assert " m, thickness " in fault and fault.endswith(" m)") and "d = " not in res.stdout
     res = sgim("info", "out/model.npz", "--json", cwd=d)
     info = json.loads(res.stdout)
     assert info["spheres"] == len(z["centers"]) and info["bonded"] == int(z["bonded"].sum())
