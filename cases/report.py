@@ -134,17 +134,41 @@ class Names:
             return (f"|{col}|" if absolute else col) + tail
         return self.name(col) + tail
 
-    def title(self, what):
-        return f"{self.study}: {what}"
+    def title(self, what, width=64):
+        """The study's name and what is drawn, wrapped so that it never runs off the figure."""
+        import textwrap
+
+        return textwrap.fill(f"{self.study}: {what}", width)
 
 
-def column_format(values):
+def integer_columns(outdir):
+    """The columns of OUTDIR/results.csv whose every non-empty cell is written as an integer (counts)."""
+    from ._batch import csv_records
+
+    path = Path(outdir) / "results.csv"
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return set()
+    recs = csv_records(path, data[:data.rfind(b"\n") + 1])
+    if not recs:
+        return set()
+    header = recs[0][1]
+    out = set()
+    for k, col in enumerate(header):
+        cells = [c[k] for _, c in recs[1:] if len(c) == len(header) and c[k] != ""]
+        if cells and all(re.fullmatch(r"-?\d+", c) for c in cells):
+            out.add(col)
+    return out
+
+
+def column_format(values, integer=False):
     """One format for every number of a column: integers as integers; otherwise fixed decimals enough for four
     significant digits of the column's smallest magnitude, or scientific when the column spans beyond 1e-3..1e5."""
     v = np.asarray([x for x in values if isinstance(x, (int, float)) and math.isfinite(x)], float)
     if not len(v):
         return lambda x: _fmt(x)
-    if np.all(v == np.round(v)) and np.all(np.abs(v) < 1e5):
+    if np.all(v == np.round(v)) and (integer or np.all(np.abs(v) < 1e5)):
         return lambda x: f"{int(x)}" if isinstance(x, (int, float)) and math.isfinite(x) else _fmt(x)
     a = np.abs(v[v != 0])
     if len(a) and (a.max() >= 1e5 or a.min() < 1e-3):
@@ -236,7 +260,7 @@ def _value(text):
             return json.loads(t)
         except ValueError:
             pass
-    return t
+    return text  # text as written, every character kept
 
 
 def read_results(outdir):
@@ -414,18 +438,19 @@ def plot_distribution(path, cols, data, names, fs=False):
         for ax in (a1, a2):
             ax.axvline(1.0, color="k", lw=0.8, ls="--")
         a2.set_ylabel("P(FS < x)")
-        a2.set_title(names.title("probability of failure P(FS < x)"), fontsize=10)
-        a1.set_title(names.title("factor of safety, cases per bin"), fontsize=10)
+        a2.set_title(names.title("probability of failure P(FS < x)", 52), fontsize=10)
+        a1.set_title(names.title("factor of safety, cases per bin", 52), fontsize=10)
     else:
         a2.set_ylabel("P(X > x)")
-        a2.set_title(names.title(f"exceedance of {what}"), fontsize=10)
-        a1.set_title(names.title(f"{what}, cases per bin"), fontsize=10)
+        a2.set_title(names.title(f"exceedance of {what}", 52), fontsize=10)
+        a1.set_title(names.title(f"{what}, cases per bin", 52), fontsize=10)
     a1.set_ylabel("cases")
     for ax in (a1, a2):
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3)
         if logx:
             ax.set_xscale("log")
+            _tidy_log(ax)
     if fs or len(cols) > 1:
         a1.legend(fontsize=8)
         a2.legend(fontsize=8, loc="best")
@@ -435,6 +460,25 @@ def plot_distribution(path, cols, data, names, fs=False):
 
 def _tick_labels(values, fmt):
     return [fmt(float(v)) for v in values]
+
+
+def _tidy_log(ax):
+    """No labels on the minor ticks of log axes (they overlap); the major ones stay."""
+    from matplotlib.ticker import NullFormatter
+
+    for axis, scale in ((ax.xaxis, ax.get_xscale()), (ax.yaxis, ax.get_yscale())):
+        if scale == "log":
+            axis.set_minor_formatter(NullFormatter())
+
+
+def _value_ticks(ax, x):
+    """The x ticks at the (few) values of a swept parameter, in the parameter's one format."""
+    xs = np.unique(x[np.isfinite(x)])
+    if 1 < len(xs) <= 12:
+        from matplotlib.ticker import NullFormatter
+
+        ax.set_xticks(xs, _tick_labels(xs, column_format(list(xs))))
+        ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def plot_response(path, col, params, data, rows, names):
@@ -461,6 +505,8 @@ def plot_response(path, col, params, data, rows, names):
             ax.set_xscale("log")
         if logscale:
             ax.set_yscale("log")
+        _value_ticks(ax, x)
+        _tidy_log(ax)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3, which="both")
         ax.set_title(names.title(f"{what} against {names.name(params[0])}"), fontsize=10)
@@ -493,6 +539,7 @@ def plot_response(path, col, params, data, rows, names):
                 ax.set_xscale("log")
             if spans_decades(yy):
                 ax.set_yscale("log")
+        _tidy_log(ax)
         fig.colorbar(m, ax=ax, label=label + (" (log scale)" if logscale else ""))
         ax.set_xlabel(names.label(px))
         ax.set_ylabel(names.label(py))
@@ -516,6 +563,7 @@ def plot_speed_error(path, col, t, err, front, labels, tname, names):
         ax.set_xscale("log")
     if np.all(e[ok] > 0) and spans_decades(e[ok], 3.0):
         ax.set_yscale("log")
+    _tidy_log(ax)
     ax.set_xlabel(names.label(tname))
     ax.set_ylabel(names.label(col, absolute=True))
     ax.set_title(names.title(f"speed against {names.name(col)}"), fontsize=9)
@@ -655,7 +703,7 @@ def _timing_lines(rows, ok_rows, tcols, names):
     return out
 
 
-def _stats_table(cols, data, names):
+def _stats_table(cols, data, names, ints=()):
     out = ["| result | unit | n | mean | sd | min | 5 % | median | 95 % | max |",
            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for c in cols:
@@ -664,10 +712,11 @@ def _stats_table(cols, data, names):
         if not len(v):
             out.append(f"| {c} | {u} | 0 | | | | | | | |")
             continue
-        q = np.percentile(v, [5, 50, 95])
+        counts = c in ints
+        q = np.percentile(v, [5, 50, 95], method="nearest" if counts else "linear")
         sd = float(v.std(ddof=1)) if len(v) > 1 else 0.0
         stats = [float(v.mean()), sd, float(v.min()), float(q[0]), float(q[1]), float(q[2]), float(v.max())]
-        f = column_format(stats if not np.all(v == np.round(v)) else list(v))
+        f = column_format(stats if not np.all(v == np.round(v)) else list(v), integer=counts)
         if np.all(v == np.round(v)):  # counts: mean and sd are not integers
             g = column_format([s for s in stats[:2] if s != round(s)] or [0.5])
             cells = [g(stats[0]), g(stats[1])] + [f(x) for x in stats[2:]]
@@ -677,9 +726,9 @@ def _stats_table(cols, data, names):
     return out
 
 
-def _rows_table(rows, params, cols, names):
+def _rows_table(rows, params, cols, names, ints=()):
     head = ["case", "status", *params, *cols]
-    fmts = {h: column_format([r.get(h) for r in rows]) for h in (*params, *cols)}
+    fmts = {h: column_format([r.get(h) for r in rows], integer=h in ints) for h in (*params, *cols)}
     units = [names.unit(h) for h in head[2:]]
     out = ["| " + " | ".join(head[:2] + [f"{h} [{u}]" if u not in NO_UNIT else h for h, u in zip(head[2:], units)])
            + " |", "|" + "---|" * len(head)]
@@ -711,6 +760,7 @@ def write_report(outdir, with_summary=False):
     num_params = [p for p in params if ok_rows and all(isinstance(r.get(p), float) for r in ok_rows)
                   and len({r[p] for r in ok_rows}) > 1]
     mc = is_monte_carlo(study, rows, params)
+    ints = integer_columns(outdir)
     name = names.study
     info = {"report": str(outdir / "report.md"), "study": name, "figures": [],
             "cases": {s: sum(1 for r in rows if r.get("status") == s) for s in ("ok", "failed", "timeout")},
@@ -759,7 +809,7 @@ def write_report(outdir, with_summary=False):
             p = plot_distribution(figdir / "pof.png", fs_cols, data, names, fs=True)
             figures += 1
             md += ["", fig_line(p, "probability of failure"), ""]
-        md += ["### Distributions", "", *_stats_table(numeric, data, names), ""]
+        md += ["### Distributions", "", *_stats_table(numeric, data, names, ints), ""]
         for c in numeric:
             if c in fs_cols or figures >= MAX_PLOTS:
                 continue
@@ -772,9 +822,9 @@ def write_report(outdir, with_summary=False):
     else:
         md += ["## Results", ""]
         if len(rows) <= MAX_TABLE_ROWS:
-            md += [*_rows_table(rows, params, numeric, names), ""]
+            md += [*_rows_table(rows, params, numeric, names, ints), ""]
         else:
-            md += [*_stats_table(numeric, data, names), ""]
+            md += [*_stats_table(numeric, data, names, ints), ""]
         if num_params and ok_rows:
             md += ["### Response surfaces", ""]
             use = num_params[:2]

@@ -720,6 +720,8 @@ def make_parser():
 
 
 def main(argv=None):
+    from ._batch import Terminated
+
     args = make_parser().parse_args(argv)
     try:
         return run_command("cases study", args)
@@ -727,6 +729,10 @@ def main(argv=None):
         print("cases study: interrupted: the finished cases are in the table (run the same command again to "
               "finish)", file=sys.stderr)
         return 130
+    except Terminated:
+        print("cases study: terminated (SIGTERM): the finished cases are in the table, the running ones were "
+              "stopped (run the same command again to finish)", file=sys.stderr)
+        return 143
 
 
 if __name__ == "__main__":

@@ -123,7 +123,7 @@ def run_mpi(n, *args, timeout=120):
 def test_grid_product_order_ids_and_case_scene(tmp_path):
     path = write_study(tmp_path, """
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         results = ["value"]
         [parameters]
         "contact.friction" = { grid = [15.0, 20.0, 25.0] }
@@ -155,7 +155,7 @@ def test_latin_hypercube_one_sample_per_stratum(tmp_path):
     n = 40
     path = write_study(tmp_path, f"""
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         seed = 11
         [parameters]
         "contact.friction" = {{ uniform = [20.0, 35.0] }}
@@ -189,7 +189,7 @@ def test_fisher_samples_mean_direction_and_concentration(tmp_path):
     n, k = 3000, 20.0
     path = write_study(tmp_path, f"""
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         seed = 5
         [parameters]
         "joint_set.0" = {{ fisher = {{ dip = 30.0, dip_direction = 120.0, kappa = {k} }} }}
@@ -214,7 +214,7 @@ def test_fisher_samples_mean_direction_and_concentration(tmp_path):
 def test_same_seed_same_cases_and_realisations(tmp_path):
     body = """
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         seed = {seed}
         [parameters]
         "dfn.seed" = {{ realisations = 25 }}
@@ -270,7 +270,7 @@ def test_bad_parameters_one_line_nothing_started(tmp_path, capsys, name):
     param, sampling, key, words = BAD[name]
     path = write_study(tmp_path, f"""
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         [parameters]
         {param}
         [sampling]
@@ -290,28 +290,28 @@ def test_bad_parameters_one_line_nothing_started(tmp_path, capsys, name):
 def test_unknown_or_missing_engine(tmp_path, capsys, engine, words):
     path = write_study(tmp_path, f"""
         base = "base.toml"
-        engine = "{engine}"
+        evaluator = "{engine}"
         [parameters]
         "contact.friction" = {{ grid = [1.0] }}
     """)
     out = tmp_path / "out"
     assert main(["run", str(path), "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "engine" in err and words in err
+    assert len(err.splitlines()) == 1 and "evaluator" in err and words in err
     assert not out.exists()
 
 
 def test_other_study_in_the_same_folder_is_refused(tmp_path, capsys):
     a = write_study(tmp_path / "a", """
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         results = ["value"]
         [parameters]
         "contact.friction" = { grid = [1.0, 2.0] }
     """)
     b = write_study(tmp_path / "b", """
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         results = ["value"]
         [parameters]
         "contact.friction" = { grid = [1.0, 3.0] }
@@ -327,7 +327,7 @@ def test_other_study_in_the_same_folder_is_refused(tmp_path, capsys):
 def test_bad_input_under_mpirun_one_line(tmp_path):
     path = write_study(tmp_path, """
         base = "base.toml"
-        engine = "noop"
+        evaluator = "noop"
         [parameters]
         "contact.frictio" = { grid = [1.0] }
     """)
@@ -342,7 +342,7 @@ def test_bad_input_under_mpirun_one_line(tmp_path):
 # --------------------------------------------------------------------------------------------- faults
 FAULT_STUDY = """
     base = "base.toml"
-    engine = "study_plugin:faulty"
+    evaluator = "study_plugin:faulty"
     results = ["value", "twice", "mode_len"]
     seed = 3
     timeout = 1.5
@@ -408,7 +408,7 @@ def test_faults_serial_and_mpi_tables_identical(tmp_path):
 
 RESTART_STUDY = """
     base = "base.toml"
-    engine = "study_plugin:faulty"
+    evaluator = "study_plugin:faulty"
     results = ["value", "twice"]
     timeout = 30
     [parameters]
@@ -495,7 +495,7 @@ def test_whole_job_killed_then_restart_with_torn_line(tmp_path):
 def test_retry_failed_runs_only_failed_cases(tmp_path):
     path = write_study(tmp_path, """
         base = "base.toml"
-        engine = "study_plugin:faulty"
+        evaluator = "study_plugin:faulty"
         results = ["twice"]
         [parameters]
         "contact.mode" = { list = ["ok", "raise"] }
@@ -510,3 +510,328 @@ def test_retry_failed_runs_only_failed_cases(tmp_path):
     assert again[:2] == rows[:2]  # finished cases untouched
     assert [r["case_id"] for r in again] == ["c00000", "c00001", "c00002", "c00003"]
     assert [r["status"] for r in again] == ["ok", "ok", "failed", "failed"]
+
+
+# --------------------------------------------------------------------------------------------- issue 17
+# 1. a text result or parameter with a line break or a Unicode line separator lost its row when results.csv was
+#    rewritten (the csv writer quoted only \n, the reader split a lone \r)
+TEXTS = ["sliding\u2028plane A", "a\rb", "a\nb", "a\r\nb", "x\x00y", 'q"q,', "\x85nel", "\u2029p", "\x0b\x0c\x1c\x1d\x1e",
+         " lead", "trail ", "", "=1+1", "\u00e9\u20ac\U0001f600", "tab\tsep", "\\"]
+TEXT_PLUGIN = f'''
+TEXTS = {TEXTS!r}
+
+def text(scene_path, case_dir, params):
+    i = int(params["contact.friction"])
+    if i < 0:
+        return {{"label": "lone \\ud800 surrogate", "v": 0.0}}
+    return {{"label": TEXTS[i], "v": float(i)}}
+'''
+
+
+def test_table_keeps_any_character_through_restart_and_retry(tmp_path):
+    path = write_study(tmp_path, f"""
+        base = "base.toml"
+        evaluator = "text_plugin:text"
+        results = ["label", "v"]
+        [parameters]
+        "contact.friction" = {{ list = {json.dumps([float(i) for i in range(-1, len(TEXTS))])} }}
+        "contact.mode" = {{ list = ["mode\\u2028two\\rthree\\n"] }}
+    """)
+    (tmp_path / "text_plugin.py").write_text(TEXT_PLUGIN)
+    out = tmp_path / "out"
+    for extra in ([], [], ["--retry-failed"]):  # the run, a restart reading the table back, a rewrite (drop)
+        assert main(["run", str(path), "-o", str(out), "--quiet", *extra]) == 0
+        rows = read_table(out)
+        assert [r["case_id"] for r in rows] == [f"c{i:05d}" for i in range(len(TEXTS) + 1)]
+        assert rows[0]["status"] == "failed" and "not valid Unicode" in rows[0]["error"]
+        assert [r["label"] for r in rows[1:]] == TEXTS
+        assert all(r["p:contact.mode"] == "mode\u2028two\rthree\n" for r in rows)
+        jl = [json.loads(ln) for ln in (out / "results.jsonl").read_text().split("\n") if ln]
+        assert [r["label"] for r in jl[1:]] == TEXTS
+    from cases.report import read_results
+
+    _, back = read_results(out)
+    assert [r["label"] for r in back[1:] if r["label"] is not None] == [t for t in TEXTS if t.strip()]
+
+
+# 2. a result named like a column of the runner overwrote it
+@pytest.mark.parametrize("name", ["status", "error", "wall_s", "rank", "case_id", "p:contact.friction"])
+def test_reserved_result_names_refused_on_load(tmp_path, capsys, name):
+    path = write_study(tmp_path, f"""
+        base = "base.toml"
+        evaluator = "noop"
+        results = ["value", "{name}"]
+        [parameters]
+        "contact.friction" = {{ grid = [1.0] }}
+    """)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "reserved name" in err and name in err
+    assert not out.exists()
+
+
+# 3. every case in a fresh process: a counter, a lowered limit and a crash never reach the next case; serial and
+#    MPI (a hostfile naming localhost twice) tables equal
+STATE_PLUGIN = '''
+import os, resource
+CALLS = []
+
+def stateful(scene_path, case_dir, params):
+    CALLS.append(1)
+    soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    mode = params["contact.mode"]
+    if mode == "lower":
+        resource.setrlimit(resource.RLIMIT_NOFILE, (64, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))
+        os.environ["LEAK"] = "yes"
+    if mode == "crash":
+        os.abort()
+    return {"calls": len(CALLS), "nofile": soft, "leak": os.environ.get("LEAK", "no"), "pid": os.getpid()}
+'''
+
+
+def test_fresh_process_per_case_serial_equals_mpi_hostfile(tmp_path):
+    path = write_study(tmp_path, """
+        base = "base.toml"
+        evaluator = "state_plugin:stateful"
+        results = ["calls", "nofile", "leak", "pid"]
+        [parameters]
+        "contact.mode" = { list = ["a", "lower", "b", "crash", "c", "lower", "d", "e"] }
+    """)
+    (tmp_path / "state_plugin.py").write_text(STATE_PLUGIN)
+    import resource
+
+    nofile = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    serial, parallel = tmp_path / "serial", tmp_path / "mpi"
+    r = subprocess.run(cli("run", path, "-o", serial, "--quiet"), cwd=REPO, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    rows = read_table(serial)
+    ok = [row for row in rows if row["status"] == "ok"]
+    assert len(ok) == 7 and all(row["calls"] == "1" for row in ok)
+    assert [row["leak"] for row in ok] == ["no", "yes", "no", "no", "yes", "no", "no"]  # only the case that set it
+    assert all(int(row["nofile"]) == nofile for row in ok)  # the lowered limit did not reach the next case
+    assert len({row["pid"] for row in ok}) == 7
+    crash = rows[3]
+    assert crash["status"] == "failed" and "SIGABRT" in crash["error"] and "2 attempts" in crash["error"]
+    hostfile = tmp_path / "hosts"
+    hostfile.write_text("localhost\nlocalhost\n")
+    r = subprocess.run(mpirun_cmd(2)[:1] + ["--hostfile", str(hostfile)] + mpirun_cmd(2)[1:] +
+                       cli("run", path, "-o", parallel, "--quiet"), cwd=REPO, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    rows_m = read_table(parallel)
+    assert {row["rank"] for row in rows_m} == {"0", "1"}
+
+    def strip(rs):
+        return [{k: v for k, v in x.items() if k not in ("wall_s", "rank", "pid")} for x in rs]
+
+    assert strip(rows) == strip(rows_m)
+
+
+# 4. the inputs changed between runs: refused with the name of what changed, unless --new-version
+def test_fingerprint_refuses_changed_inputs_until_new_version(tmp_path, capsys):
+    base = BASE.replace('mode = "ok"', 'mode = "ok"\nmesh = "surface.obj"')
+    path = write_study(tmp_path, """
+        base = "base.toml"
+        evaluator = "study_plugin:faulty"
+        results = ["twice"]
+        [parameters]
+        "contact.friction" = { grid = [1.0, 2.0] }
+    """, base=base)
+    (tmp_path / "surface.obj").write_text("v 0 0 0\n")
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out), "--quiet"]) == 0
+    table = (out / "results.csv").read_bytes()
+    assert main(["run", str(path), "-o", str(out), "--quiet"]) == 0  # unchanged: a restart, nothing to do
+    edits = [("base.toml", base.replace("kn = 1e10", "kn = 2e10"), "base scene changed"),
+             ("surface.obj", "v 0 0 1\n", "file surface.obj changed"),
+             ("study_plugin.py", PLUGIN + "\n# edited\n", "evaluator module study_plugin.py changed")]
+    capsys.readouterr()
+    for name, text, words in edits:
+        old = (tmp_path / name).read_text()
+        (tmp_path / name).write_text(text)
+        assert main(["run", str(path), "-o", str(out), "--quiet"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and words in err and "--new-version" in err, err
+        assert (out / "results.csv").read_bytes() == table
+        (tmp_path / name).write_text(old)
+    (tmp_path / "base.toml").write_text(base.replace("kn = 1e10", "kn = 2e10"))
+    assert main(["run", str(path), "-o", str(tmp_path / "new"), "--quiet"]) == 0  # a new folder
+    assert main(["run", str(path), "-o", str(out), "--quiet", "--new-version"]) == 0
+    assert (out / "versions" / "v1" / "results.csv").read_bytes() == table
+    assert json.loads((out / "study.json").read_text())["version"] == 2
+    assert len(read_table(out)) == 2
+    scene = tomllib.loads((out / "cases" / "c00000" / "scene.toml").read_text())
+    assert scene["contact"]["kn"] == 2e10
+
+
+# 5. a broken evaluator module, -o naming a file, --timeout inf and other bad options: one line, exit 2, no folder
+BROKEN = {
+    "syntax": ("def f(:\n    pass\n", "f", "SyntaxError"),
+    "raises": ("raise RuntimeError('no licence server')\n", "f", "no licence server"),
+    "not a function": ("f = 42\n", "f", "not a function"),
+    "a class": ("class f:\n    pass\n", "f", "not a function"),
+}
+
+
+@pytest.mark.parametrize("what", sorted(BROKEN))
+def test_broken_evaluator_module_one_line(tmp_path, capsys, what):
+    source, attr, words = BROKEN[what]
+    mod = "broken_" + what.replace(" ", "_")
+    (tmp_path / f"{mod}.py").write_text(source)
+    path = write_study(tmp_path, f"""
+        base = "base.toml"
+        evaluator = "{mod}:{attr}"
+        [parameters]
+        "contact.friction" = {{ grid = [1.0] }}
+    """)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and words in err and "Traceback" not in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("opts,words", [(["--timeout", "inf"], "--timeout"), (["--timeout", "nan"], "--timeout"),
+                                        (["--timeout", "0"], "--timeout"), (["--timeout", "abc"], "--timeout"),
+                                        (["--memory-limit", "0"], "--memory-limit"),
+                                        (["--memory-limit", "inf"], "--memory-limit"), (["--bogus"], "--bogus"),
+                                        (["-o", "{file}"], "not a folder")])
+def test_bad_options_one_line_no_folder(tmp_path, opts, words):
+    path = write_study(tmp_path, """
+        base = "base.toml"
+        evaluator = "noop"
+        [parameters]
+        "contact.friction" = { grid = [1.0] }
+    """)
+    (tmp_path / "a_file").write_text("keep")
+    out = tmp_path / "out"
+    opts = [o.replace("{file}", str(tmp_path / "a_file")) for o in opts]
+    args = ["run", str(path)] + (["-o", str(out)] if "-o" not in opts else []) + opts
+    r = subprocess.run(cli(*args), cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0] and lines[0].startswith("cases study: error:"), r.stderr
+    assert not out.exists() and (tmp_path / "a_file").read_text() == "keep"
+
+
+# 6. an invalid base scene: every case failed and the study exited 0
+def test_invalid_base_scene_refused_before_any_case(tmp_path, capsys):
+    path = write_study(tmp_path, """
+        base = "base.toml"
+        evaluator = "wedge-hb"
+        results = ["fs"]
+        [parameters]
+        "contact.friction" = { grid = [20.0, 30.0] }
+    """)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "base scene" in err and str(tmp_path / "base.toml") in err, err
+    assert not out.exists()
+
+
+# 7. a runaway case met the OOM killer: now --memory-limit, recorded as the failure reason
+MEM_PLUGIN = '''
+import numpy as np
+
+def hog(scene_path, case_dir, params):
+    mb = params["contact.friction"]
+    a = np.ones(int(mb * 1024 * 1024 / 8))
+    return {"mb": float(a.nbytes / 2**20)}
+'''
+
+
+def test_memory_limit_per_case_recorded(tmp_path):
+    path = write_study(tmp_path, """
+        base = "base.toml"
+        evaluator = "mem_plugin:hog"
+        results = ["mb"]
+        [parameters]
+        "contact.friction" = { list = [16.0, 4000.0, 16.0] }
+    """)
+    (tmp_path / "mem_plugin.py").write_text(MEM_PLUGIN)
+    out = tmp_path / "out"
+    r = subprocess.run(cli("run", path, "-o", out, "--quiet", "--memory-limit", "1000"), cwd=REPO,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    rows = read_table(out)
+    assert [row["status"] for row in rows] == ["ok", "failed", "ok"]
+    assert "memory limit of 1000 MB per case exceeded" in rows[1]["error"]
+    assert float(rows[2]["mb"]) == 16.0  # the next case has its own memory
+
+
+# SIGTERM (a scheduler ending the job): one line, exit 143, the same command finishes the study
+def test_sigterm_stops_cleanly_and_restart_completes(tmp_path):
+    path = write_study(tmp_path, RESTART_STUDY)
+    study = load_study(path)
+    out = tmp_path / "out"
+    p = subprocess.Popen(cli("run", path, "-o", out, "--quiet"), cwd=REPO, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while time.time() - t0 < 60:
+        if (out / "results.csv").exists() and len(read_table(out)) >= 2:
+            break
+        time.sleep(0.02)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 143 and "terminated (SIGTERM)" in err
+    assert 2 <= len(read_table(out)) < len(study.cases)
+    r = subprocess.run(cli("run", path, "-o", out, "--quiet"), cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    _check_complete(study, out)
+
+
+# --------------------------------------------------------------------------------------------- issue 19
+def test_study_copied_elsewhere_finds_its_scene_and_json_summaries(tmp_path):
+    src = write_study(tmp_path / "orig" / "studies", """
+        name = "copied"
+        base = "scenes/base.toml"
+        evaluator = "noop"
+        results = ["value"]
+        [parameters]
+        "contact.friction" = { grid = [1.0, 2.0] }
+    """)
+    (src.parent / "scenes").mkdir()
+    (src.parent / "base.toml").rename(src.parent / "scenes" / "base.toml")
+    dest = tmp_path / "copy"
+    shutil.copytree(src.parent, dest)
+    shutil.rmtree(tmp_path / "orig")
+    elsewhere = tmp_path / "cwd"
+    elsewhere.mkdir()
+    r = subprocess.run(cli("run", dest / "study.toml", "-o", "out", "--json"), cwd=elsewhere, capture_output=True,
+                       text=True, timeout=60, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["ok"] == 2 and summary["total"] == 2 and summary["study"] == "copied"
+    assert [row["value"] for row in read_table(elsewhere / "out")] == ["1.0", "2.0"]
+    r = subprocess.run(cli("report", elsewhere / "out", "--json"), cwd=REPO, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["cases"]["ok"] == 2 and Path(info["report"]).is_file()
+    # a study placed in the scenes folder: the line names the folder relative paths are read from
+    (dest / "scenes" / "study.toml").write_text((dest / "study.toml").read_text())
+    r = subprocess.run(cli("list", dest / "scenes" / "study.toml"), cwd=REPO, capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "study file's folder" in r.stderr and 'base = "base.toml"?' in r.stderr
+
+
+def test_evaluator_key_and_its_former_name(tmp_path, capsys):
+    body = """
+        base = "base.toml"
+        {keys}
+        results = ["value"]
+        [parameters]
+        "contact.friction" = {{ grid = [1.0] }}
+    """
+    a = load_study(write_study(tmp_path / "a", body.format(keys='evaluator = "noop"')))
+    b = load_study(write_study(tmp_path / "b", body.format(keys='engine = "noop"')))
+    assert a.engine == b.engine == "noop"
+    both = write_study(tmp_path / "c", body.format(keys='evaluator = "noop"\n        engine = "noop"'))
+    assert main(["list", str(both)]) == 2
+    assert "give the evaluator once" in capsys.readouterr().err
+    for f in sorted((REPO / "cases" / "studies").glob("*.toml")):
+        data = tomllib.loads(f.read_text())
+        assert "evaluator" in data and "engine" not in data, f
