@@ -79,3 +79,37 @@ def test_hanging_block_and_column_agree_in_every_engine(tmp_path):
     for e in engs:
         assert got[("hang_intact", e)] == 0 and got[("hang_small_joint", e)] == 0
         assert got[("hang_joint", e)] > 0 and got[("hang_fault", e)] > 0
+
+
+def test_smooth_joint_that_opens_and_closes_again_agrees_with_yade(tmp_path):
+    # the heel of the rocking block's joint opens in the first swing and closes again: in-house and YADE keep each
+    # joint pair's reference gap while it is open, so the upper part's final closure agrees within 0.1 % and the
+    # same pairs are open at every record (re-formed at a new gap, the in-house closure was 2.3 % off)
+    if not (shutil.which("yade") or CI):
+        pytest.skip("YADE is not installed")
+    require_engine("yade")
+    rows = cv.crossval(cases=("rocking",), engines=("dda", "yade"), work=tmp_path)
+    row = {r.engine: r for r in rows}
+    assert set(row) == {"dda", "yade"}
+    assert row["dda"].ok, cv.table(rows)
+    assert abs(row["dda"].err_value) <= 1e-3
+    assert "0 open at the end" in row["yade"].note and not row["yade"].note.startswith("0 records")
+
+
+def test_json_goes_to_stdout_like_every_other_tool(tmp_path):
+    """`cases crossval --json` printed nothing and wrote a file named by its argument; now the rows go to stdout as
+    JSON (like sgim, dda and cases study) and no file is written."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parent.parent
+    r = subprocess.run([sys.executable, "-m", "cases.cli", "crossval", "--cases", "hang", "--engines", "dda", "--json",
+                        "--quiet"], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                       env={**__import__("os").environ, "PYTHONPATH": str(repo)})
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    assert {row["case"] for row in rows} == {f"hang_{v}" for v in cv.HANG}
+    assert all(row["engine"] == "dda" and row["ok"] and row["value"] == row["ref_value"] for row in rows)
+    assert list(tmp_path.iterdir()) == []
