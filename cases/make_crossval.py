@@ -6,6 +6,9 @@
   from its fixed top layer under gravity; a 0.12 m fault layer, a through-going joint, or a small interior joint.
 - column: a 0.3 x 0.3 x 1.5 m FCC column (r = 0.05) hanging from its top, bonds as central springs (shear ratio
   0), heavily damped: the static elongation against the exact solution of the spring network.
+- rocking: a 0.12 x 0.12 x 0.2 m block of FCC spheres (r = 0.015, central bonds) cut by a horizontal
+  zero-thickness joint at z = 0.07, its base fixed, pushed sideways at its top: the heel of the smooth joint
+  opens in the first swing and closes again as local damping brings the block to rest.
 - wedge: the paper's wedge (joints 45/005 and 55/135, face 65/065, height 10 m) as FCC spheres (r = 0.5): the
   wedge's spheres bonded, the rock behind the joints fixed, the joints smooth: the friction at which it starts to
   slide against Hoek & Bray and the DDA block wedge.
@@ -27,6 +30,8 @@ HANG_VARIANTS = {
     "small_joint": [dict(name="small joint", centre=[0.5, 0.3, 0.6], dip=30.0, dip_direction=90.0,
                          radius=0.15, thickness=0.0)],
 }
+ROCKING_JOINT = [dict(name="joint", centre=[0.06, 0.06, 0.07], dip=0.0, dip_direction=0.0, radius=1.0,
+                      thickness=0.0)]
 WEDGE = dict(joint_a=(45.0, 5.0), joint_b=(55.0, 135.0), face=(65.0, 65.0), height=10.0, radius=0.5, margin=1.6,
              rock=1.5)
 
@@ -104,6 +109,19 @@ def write_all(folder=HERE):
                                             "frames": 1},
         {"kn": 1e7, "ks": 5e6, "friction": 30.0},
         {"density": 2600.0, "fixed": ["z>1.4"], "bond_young": 1e8, "bond_shear_ratio": 0.0})
+    files["rocking_model.toml"] = sgim_scene(
+        "rocking_model", "A 0.12 x 0.12 x 0.2 m block of bonded FCC spheres (r = 0.015) cut by a horizontal joint "
+        "at z = 0.07.", (0.0, 0.0, 0.0), (0.12, 0.12, 0.2), 0.015, ROCKING_JOINT)
+    files["rocking.toml"] = dda_scene(
+        "rocking", "The block's base (z < 0.03) is fixed, the joint smooth (friction 40 deg), bonds central springs; "
+        "0.25 N on each top sphere (z > 0.155) rocks the upper part: the heel of the joint opens in the first "
+        "swing and closes again, local damping 0.4 brings it to rest. In-house and YADE keep each joint pair's "
+        "reference gap while it is open (the same smooth-joint rule).", "rocking_model.toml",
+        {"duration": 0.06, "record_every": 0.001, "local_damping": 0.4, "frames": 1},
+        {"kn": 1e6, "ks": 5e5, "friction": 30.0},
+        {"density": 2600.0, "fixed": ["z<0.03"], "bond_young": 1e8, "bond_shear_ratio": 0.0, "smooth_joints": True,
+         "joint_friction": 40.0}) + "\n" + _table("spheres.load", {"region": "z>0.155", "force": [0.25, 0.0, 0.0]},
+                                                  True)
     lo, hi, cavities = wedge_cavities()
     w = WEDGE
     discs = [dict(name=f"joint {n}", centre=[0.0, 0.0, 0.0], dip=d[0], dip_direction=d[1], radius=60.0,
