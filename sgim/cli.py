@@ -259,7 +259,8 @@ def make_parser():
     s.add_argument("--hide-intact", action="store_true")
     s.add_argument("--translucent", action="store_true", help="draw intact spheres translucent")
     s.add_argument("--cut-away", action="append", default=[], metavar="EXPR",
-                   help="remove spheres where EXPR holds, e.g. 'y<0' (repeatable)")
+                   help="remove the spheres where EXPR holds, e.g. 'y<0'; repeated, the spheres "
+                        "where all of them hold (--cut-away 'y<0' --cut-away 'z>50' removes that corner)")
     s.add_argument("--width", type=int, default=1600)
     s.add_argument("--height", type=int, default=1100)
     s.add_argument("--quiet", action="store_true")
