@@ -590,10 +590,19 @@ def _orientation(v):
 def pole_projection(dip, dip_direction):
     """(x east, y north) of the pole of a plane on the lower-hemisphere equal-area (Schmidt) net of radius 1: the
     pole plunges 90 - dip towards dip direction + 180, at distance sqrt(2) sin((90 - plunge) / 2) = sqrt(2)
-    sin(dip / 2) from the centre."""
+    sin(dip / 2) from the centre (a vertical plane's pole on the circle)."""
     d, a = np.radians(np.asarray(dip, float)), np.radians(np.asarray(dip_direction, float) + 180.0)
     r = np.sqrt(2.0) * np.sin(d / 2.0)
     return r * np.sin(a), r * np.cos(a)
+
+
+def _law(kind, spec, unit):
+    u = "" if unit in NO_UNIT else f" {unit}"
+    if kind == "uniform" and isinstance(spec, list) and len(spec) == 2:
+        return f"uniform {spec[0]:g} to {spec[1]:g}{u}"
+    if kind == "normal" and isinstance(spec, list) and len(spec) == 2:
+        return f"normal, mean {spec[0]:g}{u}, sd {spec[1]:g}{u}"
+    return f"{kind} {spec}"
 
 
 def plot_inputs(path, study, rows, names):
@@ -613,7 +622,7 @@ def plot_inputs(path, study, rows, names):
         else:
             v = np.array([x for x in vals if isinstance(x, float) and math.isfinite(x)])
             if len(v):
-                panels.append(("hist", p, v, spec[kind]))
+                panels.append((kind, p, v, spec[kind]))
     if not panels:
         return None
     plt = _plt()
@@ -630,10 +639,10 @@ def plot_inputs(path, study, rows, names):
             for lab, (x0, y0) in (("N", (0, 1.06)), ("E", (1.08, 0)), ("S", (0, -1.1)), ("W", (-1.1, 0))):
                 ax.text(x0, y0, lab, ha="center", va="center", fontsize=9)
             x, y = pole_projection(v[:, 0], v[:, 1])
-            ax.plot(x / np.sqrt(2), y / np.sqrt(2), ".", ms=4, color="C0", label=f"{len(v)} sampled poles")
+            ax.plot(x, y, ".", ms=4, color="C0", label=f"{len(v)} sampled poles")
             if isinstance(spec, dict) and "dip" in spec:
                 mx, my = pole_projection(spec["dip"], spec["dip_direction"])
-                ax.plot(mx / np.sqrt(2), my / np.sqrt(2), "r+", ms=12, mew=2,
+                ax.plot(mx, my, "r+", ms=12, mew=2,
                         label=f"mean {spec['dip']:g}/{spec['dip_direction']:03.0f}, kappa {spec.get('kappa', 0):g}")
             ax.set_aspect("equal")
             ax.set_xlim(-1.2, 1.2)
@@ -649,9 +658,7 @@ def plot_inputs(path, study, rows, names):
             ax.set_xlabel(names.label("p:" + p))
             ax.set_ylabel("cases")
             ax.grid(alpha=0.3)
-            sk = next(iter(spec)) if isinstance(spec, dict) else ""
-            ax.set_title(f"{names.name('p:' + p)}\n{sk} {spec.get(sk) if isinstance(spec, dict) else ''}",
-                         fontsize=9)
+            ax.set_title(f"{names.name('p:' + p)}\n{_law(kind, spec, names.unit('p:' + p))}", fontsize=9)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     fig.suptitle(names.title("sampled inputs"), fontsize=11)

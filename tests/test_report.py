@@ -174,3 +174,120 @@ def test_report_one_parameter_sweep(tmp_path):
     text = write_report(tmp_path).read_text()
     assert _pngs(tmp_path) == ["response_fs.png"]
     assert "Monte-Carlo" not in text and "| c00003 | ok |" in text
+
+
+# --------------------------------------------------------------------------------------------- issue 17, point 9
+def _capture(monkeypatch):
+    """What every saved figure shows: titles, axis labels and scales, colour norms (read from matplotlib)."""
+    import cases.report as rp
+
+    seen = {}
+    real = rp._save
+
+    def save(fig, path):
+        axes = []
+        for ax in fig.axes:
+            norms = [type(c.norm).__name__ for c in ax.collections if hasattr(c, "norm")]
+            axes.append({"title": ax.get_title(), "xlabel": ax.get_xlabel(), "ylabel": ax.get_ylabel(),
+                         "xscale": ax.get_xscale(), "yscale": ax.get_yscale(), "norms": norms})
+        seen[path.name] = {"suptitle": fig._suptitle.get_text() if fig._suptitle else "", "axes": axes}
+        return real(fig, path)
+
+    monkeypatch.setattr(rp, "_save", save)
+    return seen
+
+
+def test_report_units_names_titles_inputs_and_timing_apart(tmp_path, monkeypatch):
+    """The reproducer of the issue: a Monte-Carlo wedge study (Fisher joint, normal friction) whose report had no
+    units, raw column names, titles without the study, no picture of the inputs and timing plotted as a result."""
+    seen = _capture(monkeypatch)
+    rng = np.random.default_rng(2)
+    n = 60
+    header = ["case_id", "status", "error", "wall_s", "rank", "p:contact.friction", "p:generate.0.joint_a", "fs",
+              "volume", "error_fs", "run_s"]
+    rows = []
+    for k in range(n):
+        dip, dd = float(rng.normal(45, 4)), float(rng.normal(5, 4) % 360)
+        rows.append([f"c{k:05d}", "ok", "", repr(0.01 + 0.001 * k), 0, repr(float(rng.normal(25, 3))),
+                     json.dumps([dip, dd]), repr(float(rng.normal(1.3, 0.3))), repr(float(rng.uniform(100, 900))),
+                     repr(float(rng.normal(0, 0.01))), repr(float(rng.uniform(0.5, 1.5)))])
+    study = {"name": "wedge_pof", "evaluator": "wedge-dda", "results": ["fs", "volume", "error_fs", "run_s"],
+             "units": {"fs": "-", "volume": "m^3", "run_s": "s"}, "sampling": {"method": "random", "samples": n},
+             "parameters": {"contact.friction": {"normal": [25.0, 3.0]},
+                            "generate.0.joint_a": {"fisher": {"dip": 45.0, "dip_direction": 5.0, "kappa": 100.0}}},
+             "cases": [{"case_id": f"c{k:05d}"} for k in range(n)]}
+    _write(tmp_path, study, header, rows)
+    text = write_report(tmp_path).read_text()
+    assert "`p:contact.friction` deg" in text and "`volume` m^3" in text
+    assert "`error_fs` = FS_DDA / FS_HB - 1" in text  # what the error means
+    assert "inputs.png" in seen and "dist_run_s.png" not in seen  # timing is not drawn as a result
+    stats = text.split("### Distributions")[1].split("## Timing")[0]
+    assert "| run_s |" not in stats and "run_s" in text.split("## Timing")[1]
+    inputs = seen["inputs.png"]
+    assert "wedge_pof" in inputs["suptitle"]
+    titles = [a["title"] for a in inputs["axes"]]
+    assert any("equal-area" in t and "joint A orientation" in t for t in titles)
+    hist = next(a for a in inputs["axes"] if "friction" in a["title"])
+    assert hist["xlabel"] == "joint friction angle (contact.friction) [deg]"
+    for name, fig in seen.items():
+        for a in fig["axes"]:
+            if a["title"] and not fig["suptitle"]:  # panels under a figure title that names the study
+                assert a["title"].startswith("wedge_pof:"), (name, a["title"])
+            assert "p:" not in a["xlabel"] + a["ylabel"], (name, a)
+    vol = seen["dist_volume.png"]["axes"][0]
+    assert vol["xlabel"] == "wedge volume [m^3]"
+
+
+def test_pole_projection_equal_area_lower_hemisphere():
+    from cases.report import pole_projection
+
+    # a horizontal plane's pole is vertical: the centre; a vertical plane dipping east has a horizontal pole
+    # pointing west: on the primitive circle (radius sqrt 2 sin 45 = 1) at the west; dip 60 towards north: the
+    # pole plunges 30 towards south, at sqrt(2) sin(30) from the centre
+    for (dip, dd), (x, y) in (((0.0, 123.0), (0.0, 0.0)), ((90.0, 90.0), (-1.0, 0.0)),
+                              ((60.0, 0.0), (0.0, -math.sqrt(2) * 0.5))):
+        px, py = pole_projection(dip, dd)
+        assert abs(px - x) < 1e-12 and abs(py - y) < 1e-12
+    # equal area: the fraction of poles within angle t of the vertical is 1 - cos t, the area fraction r^2 / 2
+    rng = np.random.default_rng(1)
+    z = rng.uniform(0, 1, 20000)  # uniform on the lower hemisphere: cos of the pole's angle from vertical
+    dip = np.degrees(np.arccos(z))
+    x, y = pole_projection(dip, rng.uniform(0, 360, len(z)))
+    inner = np.mean(x * x + y * y <= 0.5)  # the circle of radius 1 / sqrt 2: half the net's area, 1 - cos 60
+    assert abs(inner - 0.5) < 0.015
+
+
+def test_one_number_format_per_column_and_log_scales(tmp_path, monkeypatch):
+    """The issue's column switched between `29815` and `2.994e+04`; a 65x error range was drawn on a linear colour
+    scale."""
+    from cases.report import column_format
+
+    col = [29815.0, 29940.3, 31000.25, 30000.0]
+    f = column_format(col)
+    out = [f(v) for v in col]
+    assert len({len(s.split(".")[-1]) if "." in s else 0 for s in out}) == 1 and not any("e" in s for s in out), out
+    assert [float(s) for s in out] == pytest.approx(col, rel=1e-4)
+    seen = _capture(monkeypatch)
+    header = ["case_id", "status", "error", "wall_s", "rank", "p:simulation.safety", "p:contact.kn", "error_disp",
+              "steps"]
+    rows, k = [], 0
+    for s in (0.8, 0.4, 0.2, 0.1):
+        for q in (1e8, 1e9, 1e10):
+            err = 2e-4 * (1e10 / q) ** 0.5 * (1 + s)  # spans 1.2e-4 .. 3.6e-3: about 30x
+            rows.append([f"c{k:05d}", "ok", "", "0.5", 0, repr(s), repr(q), repr(err), repr(1000 + 37 * k)])
+            k += 1
+    study = {"name": "incline_res", "evaluator": "dda-run", "results": ["error_disp", "steps"],
+             "sampling": {"method": "grid"}, "cases": [{"case_id": r[0]} for r in rows]}
+    _write(tmp_path, study, header, rows)
+    text = write_report(tmp_path).read_text()
+    mesh = seen["response_error_disp.png"]["axes"][0]
+    assert "LogNorm" in mesh["norms"] and mesh["xlabel"] == "time-step safety factor (simulation.safety)"
+    assert seen["response_error_disp.png"]["axes"][1]["ylabel"].startswith("|s / s_ref - 1| [relative]")
+    lin = seen["response_steps.png"]["axes"][0]
+    assert "LogNorm" not in lin["norms"]  # 1000 .. 1407: less than 10x
+    table = [ln.split("|")[1:-1] for ln in text.split("## Results")[1].split("###")[0].splitlines()
+             if ln.startswith("| c0")]
+    for j in range(2, 6):
+        cells = [c.strip() for c in (r[j] for r in table)]
+        styles = {("e" in c, len(c.split(".")[-1].split("e")[0]) if "." in c else 0) for c in cells}
+        assert len(styles) == 1, cells
