@@ -135,6 +135,7 @@ class CaseProcess:
         self.proc = None
         self.pending = deque()  # (tag, timeout) in submission order
         self.front_t0 = None
+        self.reuse = False
 
     def start(self):
         """Start the case server now (it is started on demand otherwise)."""
@@ -162,9 +163,10 @@ class CaseProcess:
 
     def _backstop(self):
         """The time after which a case server that neither answers nor dies is killed: the front case's limit
-        (enforced by the server itself) plus a minute."""
+        (enforced by the server itself) plus a minute; with --reuse-process the limit itself (the case runs in
+        the server)."""
         timeout = self.pending[0][1] if self.pending else None
-        return None if timeout is None else self.front_t0 + timeout + 60.0
+        return None if timeout is None else self.front_t0 + timeout + (0.0 if self.reuse else 60.0)
 
     def poll(self, wait):
         """[(tag, outcome dict)] of the cases finished within `wait` seconds (None: until one finishes)."""
@@ -195,8 +197,8 @@ class CaseProcess:
         if not out and back is not None and time.perf_counter() >= back:
             tag, timeout = self.pending.popleft()
             self.kill()
-            out.append((tag, {"status": "timeout", "error": f"time limit of {timeout:g} s exceeded (case server "
-                                                            "killed)", "wall_s": timeout}))
+            out.append((tag, {"status": "timeout", "error": f"time limit of {timeout:g} s exceeded (killed)",
+                              "wall_s": timeout}))
             out += [(t, {"status": "died", "error": "case server killed"}) for t, _ in self.pending]
             self.pending.clear()
         return out
@@ -666,12 +668,13 @@ def _on_sigterm(signum, frame):
 
 
 def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_failed=False, force=False,
-              new_version=False, memory_mb=None):
+              new_version=False, memory_mb=None, reuse=False):
     """Run every case not yet in OUTDIR/results.csv. Serial when comm is None; otherwise call on every rank
     (rank 0 hands out cases and writes the table, all ranks run cases). Returns a summary dict on rank 0.
     `force`: a folder holding a different study has that study's files removed first; `new_version`: a folder
     holding this study with other inputs (or another study) has them moved to versions/vN/ (see _prepare).
-    `memory_mb`: the address-space limit of every case."""
+    `memory_mb`: the address-space limit of every case. `reuse`: run the cases in the rank's case server itself,
+    one after the other (no fork per case: faster, but a case's state, limits and crashes reach the next)."""
     outdir = Path(outdir).resolve()
     timeout = timeout if timeout is not None else study.timeout
     try:
@@ -679,7 +682,7 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
     except ValueError:  # not the main thread
         pass
     if comm is not None and comm.Get_rank() != 0:
-        _worker(comm, study, outdir, timeout, memory_mb)
+        _worker(comm, study, outdir, timeout, memory_mb, reuse)
         return {}
     size = 1 if comm is None else comm.Get_size()
     t0 = time.perf_counter()
@@ -730,7 +733,7 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
             progress(f"{n}/{total} cases done, {stats['failed']} failed, {stats['timeout']} timeout, "
                      f"ETA {eta:.0f} s{extra}")
 
-    run = _Run(study, outdir, timeout, memory_mb, record)
+    run = _Run(study, outdir, timeout, memory_mb, record, reuse)
     try:
         if comm is None:
             _serial(run, todo, local)
@@ -768,12 +771,14 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
 class _Run:
     """What every loop needs: the requests of cases, the limits, the table's record function."""
 
-    def __init__(self, study, outdir, timeout, memory_mb, record):
+    def __init__(self, study, outdir, timeout, memory_mb, record, reuse=False):
         self.study, self.outdir, self.timeout, self.memory_mb, self.record = study, outdir, timeout, memory_mb, record
+        self.reuse = reuse
 
     def submit(self, local, i, attempt):
-        local.submit((i, attempt), _request(self.study, self.outdir, self.study.cases[i]), self.timeout,
-                     self.memory_mb)
+        local.reuse = self.reuse
+        local.submit((i, attempt), {**_request(self.study, self.outdir, self.study.cases[i]), "reuse": self.reuse},
+                     self.timeout, self.memory_mb)
 
 
 def _died_row(outcome, attempts):
@@ -868,14 +873,14 @@ def _master(comm, run, todo, local):
             time.sleep(POLL_S)
 
 
-def _worker(comm, study, outdir, timeout, memory_mb):
+def _worker(comm, study, outdir, timeout, memory_mb, reuse=False):
     from mpi4py import MPI
 
     rank = comm.Get_rank()
     local = CaseProcess(study.path.parent.resolve(), rank)
     local.start()
     launcher = _Launcher()
-    run = _Run(study, outdir, timeout, memory_mb, None)
+    run = _Run(study, outdir, timeout, memory_mb, None, reuse)
     st = MPI.Status()
     try:
         while True:

@@ -125,10 +125,10 @@ def _pdeathsig():
         pass
 
 
-def _run_case(req, fn, wfd, saved_err):
-    """In the forked child: limits, the case folder, the evaluator; the answer on `wfd`."""
+def _run_case(req, fn, saved_err, set_limit=True):
+    """In the forked child: limits, the case folder, the evaluator; returns the answer."""
     mem = req.get("memory_mb")
-    if mem:
+    if mem and set_limit:
         lim = int(mem * 1024 * 1024)
         resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
     case_dir = Path(req["case_dir"])
@@ -163,7 +163,19 @@ def _run_case(req, fn, wfd, saved_err):
         pass
     os.dup2(saved_err, 1)
     os.dup2(saved_err, 2)
-    _send(wfd, answer)
+    return answer
+
+
+_LIMITED = [False]
+
+
+def _run_inline(req, fn, saved_err):
+    """--reuse-process: the case in the server itself (its time limit is the rank's: it kills the server)."""
+    if req.get("memory_mb") and not _LIMITED[0]:
+        lim = int(req["memory_mb"] * 1024 * 1024)
+        resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
+        _LIMITED[0] = True
+    return _run_case(req, fn, saved_err, set_limit=False)
 
 
 class _Spare:
@@ -192,7 +204,7 @@ class _Spare:
                         from cases.evaluators import resolve_evaluator
 
                         fn = resolve_evaluator(*key).fn
-                    _run_case(req, fn, ans_w, saved_err)
+                    _send(ans_w, _run_case(req, fn, saved_err))
             except BaseException:  # noqa: BLE001 - the server sees a death
                 code = 70
             os._exit(code)
@@ -302,6 +314,9 @@ def main():
                         os.dup2(saved_err, 2)
             sys.stdout.flush()
             sys.stderr.flush()
+            if req.get("reuse"):  # --reuse-process: the case runs here (no fork); its state stays for the next
+                _send(fout, _run_inline(req, fns[key], saved_err))
+                continue
             case = spare if spare is not None else _Spare(fns, (fin, fout), saved_err)
             case.start(req)
             spare = _Spare(fns, (fin, fout), saved_err)  # forked while the case runs

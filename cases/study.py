@@ -636,7 +636,7 @@ def cmd_run(args):
         return EXIT_BAD_INPUT
     summary = run_study(study, Path(args.output), timeout=args.timeout, comm=comm, progress=say,
                         retry_failed=args.retry_failed, force=args.force, new_version=args.new_version,
-                        memory_mb=args.memory_limit)
+                        memory_mb=args.memory_limit, reuse=args.reuse_process)
     if rank != 0:
         return 0
     f = summary
@@ -700,6 +700,9 @@ def make_parser():
     r.add_argument("--memory-limit", type=float, default=None, metavar="MB",
                    help="address-space limit of each case [MB] (RLIMIT_AS); a case past it fails with that reason")
     r.add_argument("--retry-failed", action="store_true", help="run failed and timed-out cases again")
+    r.add_argument("--reuse-process", action="store_true", help="run the cases one after the other in one process "
+                   "per rank instead of a fresh process each (less overhead per case; a case's state, limits and "
+                   "crashes then reach the next case)")
     r.add_argument("--force", action="store_true", help="replace a different study's output in the folder (its "
                    "own files only; files added by hand stay); the same study is resumed with or without it")
     r.add_argument("--new-version", action="store_true", help="the study's inputs changed (fingerprint): move the "

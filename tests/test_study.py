@@ -835,3 +835,40 @@ def test_evaluator_key_and_its_former_name(tmp_path, capsys):
     for f in sorted((REPO / "cases" / "studies").glob("*.toml")):
         data = tomllib.loads(f.read_text())
         assert "evaluator" in data and "engine" not in data, f
+
+
+# 3b. the documented option: --reuse-process runs the cases one after the other in one process per rank (less
+#     overhead; the state of a case reaches the next, as the README says)
+def test_reuse_process_option_shares_state(tmp_path):
+    path = write_study(tmp_path, """
+        base = "base.toml"
+        evaluator = "state_plugin:stateful"
+        results = ["calls", "leak"]
+        [parameters]
+        "contact.mode" = { list = ["a", "lower", "b"] }
+    """)
+    (tmp_path / "state_plugin.py").write_text(STATE_PLUGIN)
+    out = tmp_path / "out"
+    r = subprocess.run(cli("run", path, "-o", out, "--quiet", "--reuse-process"), cwd=REPO, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    rows = read_table(out)
+    assert [row["calls"] for row in rows] == ["1", "2", "3"] and rows[2]["leak"] == "yes"
+
+
+# 8. the framework overhead per case, measured by the benchmark with its machine line (fork per case and
+#    --reuse-process, serial and under mpirun)
+def test_bench_study_overhead_reports_machine_and_figures():
+    mpirun_cmd(2)
+    r = subprocess.run([sys.executable, "-m", "cases.bench_study", "--overhead-only", "--noop", "12", "--json"],
+                       cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    from sgim.machine import machine_line
+
+    assert lines[0] == machine_line()
+    res = json.loads(r.stdout[r.stdout.index("{"):])
+    assert set(res["overhead"]) == {"1 fork", "2 fork", "1 reuse", "2 reuse"}
+    for v in res["overhead"].values():
+        assert math.isfinite(v["per_case_ms"]) and v["cpu_per_case_ms"] > 0
+    assert res["fork"]["cpu_ms"] > 0
