@@ -1,38 +1,53 @@
 """The study runner: serial, or under mpirun with rank 0 handing out cases (dynamic load balancing).
 
-Every case runs in a case process (a child of its rank, one per rank, reused from case to case) so that a
-case past its time limit is killed with its process group while the rank carries on, and rank 0's main thread
-stays free to hand out cases and write the table while its own case process computes: rank 0 runs cases too.
+Every rank starts one case server (cases/_caseserver.py: imports and the evaluator's warm-up once) that forks a
+fresh process for every case, so a case's module state, resource limits, memory and crash never reach the next
+case, and the tables of a serial and an MPI run are equal for any evaluator. The server enforces the time limit
+(the case's process group is killed) and --memory-limit (RLIMIT_AS in the case's process); rank 0's main thread
+stays free to hand out cases and write the table while its own cases compute: rank 0 runs cases too. While cases
+are short (median under PREFETCH_BELOW_S) each rank holds a second case queued in its server, so that the next
+case starts without a round trip to rank 0. --reuse-process runs the cases in the server itself, one after the
+other (no fork: less overhead; a case's state then reaches the next).
 
-Messages (MPI, pickled): a rank sends ("ready",) and then ("done", index, row) or ("died", index, reason)
-after each case; rank 0 answers ("case", index, attempt) or ("stop",). Waits poll (Iprobe + short sleeps, select
-on the case process's pipe): Open MPI's blocking receive spins a core, which a study on few cores cannot spare.
+Messages (MPI, pickled): rank 0 sends ("case", index, attempt) or ("stop",); a rank answers ("done", index, row)
+after each case (row status "died" when the case's process died without answering). Waits poll (Iprobe + short
+sleeps, select on the case server's pipe): Open MPI's blocking receive spins a core, which a study on few cores
+cannot spare.
 
 Faults:
 - a case that raises: status "failed", error = the exception's one line (traceback in the case's error.txt);
+  past --memory-limit: "memory limit of N MB per case exceeded (MemoryError ...)";
 - a case past its time limit: its process group is killed, status "timeout";
-- a case process that dies (killed, crashed interpreter): the case is handed out again, preferably to another
-  rank; the second death is recorded as "failed" with the signal;
-- a rank that dies: Open MPI ends the whole job (mpirun kills the other ranks; case processes die with their
-  rank through PR_SET_PDEATHSIG). Started again, the study skips the cases in the table and runs the rest:
-  in-flight cases of the killed job were never written, so none is lost and none is duplicated.
+- a case process that dies (killed, crashed interpreter, a signal past the memory limit): the case is handed out
+  again, preferably to another rank; the second death is recorded as "failed" with the signal;
+- a rank that dies: Open MPI ends the whole job (mpirun kills the other ranks; case servers and cases die with
+  their parent through PR_SET_PDEATHSIG). Started again, the study skips the cases in the table and runs the
+  rest: in-flight cases of the killed job were never written, so none is lost and none is duplicated.
 - mpirun killed (SIGKILL): its ranks run on; each notices within 0.5 s that its parent has gone, kills its case
-  process and exits (rank 0 after closing the table), so a restart does not meet a run still writing.
+  server and exits (rank 0 after closing the table), so a restart does not meet a run still writing.
+- SIGTERM (a batch scheduler at the end of the job's time, or mpirun forwarding it): the rank stops like Ctrl-C:
+  the running cases are killed, the table is closed, exit status 143; the same command finishes the study.
 
-The table (rank 0 only): OUTDIR/results.jsonl then OUTDIR/results.csv get each row as one write, flushed and
-fsynced. results.csv is the record: on a restart a torn last line (a crash inside a write) is dropped, and
-JSON lines whose case is not in results.csv are dropped; any other line that is not a row of the study's table
-(not UTF-8 or CSV or JSON, the wrong number of cells, an unknown status or case, a case twice) stops the run with
-one line naming the file and the line (:func:`check_table`), before any case runs. When every case is in, both files are rewritten in
-case order (temporary file, fsync, atomic rename), so serial and MPI runs give the same files (apart from the
-wall_s and rank columns).
+The table (rank 0 only): OUTDIR/results.jsonl then OUTDIR/results.csv get each row as one write, flushed to the
+kernel at once (a killed runner loses nothing) and fdatasynced by a thread within milliseconds (a machine crash:
+group commit, no case waits for the disk). Cells are quoted whenever they hold anything but plain text (csv_line),
+so any character a result holds (line breaks, U+2028, NUL, quotes) reads back in its cell. results.csv is the
+record: on a restart a torn last line (a crash inside a write) is dropped, JSON lines whose case is not in
+results.csv are dropped and rows whose JSON line is missing run again; any other line that is not a row of the
+study's table (not UTF-8 or CSV or JSON, the wrong number of cells, an unknown status or case, a case twice)
+stops the run with one line naming the file and the line (:func:`check_table`), before any case runs. When every
+case is in, both files are rewritten in case order (temporary file, fsync, atomic rename), so serial and MPI runs
+give the same files (apart from the wall_s and rank columns).
 A lock (flock on OUTDIR/.lock) stops two runs writing one folder. OUTDIR/runs.jsonl gets one line per
 completed run (ranks, cases run, wall time).
 
 The output folder (sgim/outdir.py's rule): a new or empty folder, or one holding the same study (a restart);
 a folder with other files and no study is refused, as is one holding a different study unless --force, which
-removes that study's own files only (study_files: the tables, study.json, runs.jsonl, report.md, report/ and
-cases/ID/ of its cases; files added by hand stay). The marker .rockdem-output lists them.
+removes that study's own files only (study_files: the tables, study.json, runs.jsonl, report.md, report/,
+versions/ and cases/ID/ of its cases; files added by hand stay). The marker .rockdem-output lists them.
+study.json holds the study's fingerprint (Study.fingerprint: the study file, the base scene, every file it
+names, the evaluator's module): a restart whose inputs differ is refused with one line naming what changed,
+unless --new-version, which moves the earlier tables and cases to versions/vN/ and runs every case again.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Evaluators of batch studies: one case's scene -> a dict of scalar results.
 
-``EVALUATORS[name]`` is an :class:`Evaluator`; a study names one as its ``engine``. The runner (cases/study.py)
+``EVALUATORS[name]`` is an :class:`Evaluator`; a study names one as its ``evaluator``. The runner (cases/_batch.py)
 calls ``fn(scene_path, case_dir, params)`` with the case's scene (the study's base scene with the case's values
 substituted), the case's own folder (an evaluator may write files there) and the case's parameters
 ``{path: value}``; the evaluator returns ``{name: float | int | bool}`` and raises on failure (the runner records
@@ -56,8 +56,12 @@ Error columns are named ``error_*`` (the report draws speed against error for ea
 ``error`` column holds a failed case's message). Timing columns an evaluator returns (``run_s``, ``build_s``,
 ``excavate_s``, ``engine_s``) time the computation proper: the first DDA (or excavation) case of a process first
 runs a few steps of the same model (a coarse lattice), so that the one-off compilation of the kernels does not
-fall on it (the runner's ``wall_s`` includes it). The runner keeps one case process per rank, so this happens
-once per rank.
+fall on it (the runner's ``wall_s`` includes it). The runner calls the evaluator's ``warm`` once in the case
+server of each rank, before the cases are forked from it, so every case finds the kernels compiled.
+
+Every evaluator declares its ``units`` (the report's axes and tables) and a ``check`` of the base scene, run once
+before any case. The registry: :func:`registry` (the framework's noop / sleep / spin and EVALUATORS) and
+:func:`resolve_evaluator` (a registry name or ``module:function``).
 """
 from __future__ import annotations
 

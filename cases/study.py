@@ -1,16 +1,20 @@
 """Batch studies: a base scene, parameters to vary, one evaluator per case, one results table.
 
-    cases study run STUDY -o OUTDIR [--timeout S] [--retry-failed] [--quiet]     (serial)
-    mpirun -n N cases study run STUDY -o OUTDIR [...]                              (MPI, mpi4py)
-    cases study list STUDY [--json]                                                (the cases, nothing run)
-    cases study report OUTDIR                                                      (cases/report.py)
+    cases study run STUDY -o OUTDIR [--timeout S] [--memory-limit MB] [--retry-failed] [--force]
+                                    [--new-version] [--reuse-process] [--quiet] [--json]         (serial)
+    mpirun -n N cases study run STUDY -o OUTDIR [...]                                            (MPI, mpi4py)
+    cases study list STUDY [--json] | --evaluators                                  (the cases, nothing run)
+    cases study report OUTDIR [--json]                                              (cases/report.py)
 
 A study file (TOML)::
 
     name = "wedge_friction"
-    base = "../dda_wedge.toml"        # the scene every case starts from (relative to the study file)
-    engine = "wedge-hb"               # an evaluator: a name in the registry, or "module:function"
-    results = ["fs", "phi_crit"]      # the scalars to collect (the evaluator must return them)
+    base = "../dda_wedge.toml"        # the scene every case starts from (relative to the study file's folder,
+                                      # wherever the study file is and whatever the working folder)
+    evaluator = "wedge-hb"            # a name in the registry, or "module:function" (`engine` is its former name)
+    results = ["fs", "phi_crit"]      # the scalars to collect (the evaluator must return them; not the table's
+                                      # own columns case_id, status, error, wall_s, rank, ...)
+    units = { phi_crit = "deg" }      # optional: units for the report (the evaluator declares its own)
     seed = 1                          # every random choice comes from numpy's Generator seeded here
     timeout = 600                     # per case [s] (optional; `--timeout` overrides)
 
@@ -33,9 +37,12 @@ A Fisher parameter points at an orientation: a [dip, dip_direction] pair or a ta
 `dip_direction` keys. Latin hypercube: one sample per stratum in every dimension (a Fisher orientation is two
 dimensions: the angle from the mean pole through its distribution function, and the azimuth).
 
-Evaluators: ``fn(scene_path, case_dir, params) -> {name: scalar}``. The registry is this module's built-in
-``noop`` / ``sleep`` / ``spin`` (framework checks and benchmarks) merged with ``cases.evaluators.EVALUATORS``.
-``engine = "module:function"`` loads a user's evaluator (the study file's folder is on the import path).
+Evaluators: ``fn(scene_path, case_dir, params) -> {name: scalar}``. The registry (cases/evaluators.py) holds
+the framework's ``noop`` / ``sleep`` / ``spin`` (checks and benchmarks) and ``EVALUATORS``.
+``evaluator = "module:function"`` loads a user's evaluator (the study file's folder is on the import path); a
+module that cannot be imported (missing, a syntax error, an exception while it runs) or a name that is not a
+function is refused with one line. Before any case runs, the base scene goes through the evaluator's ``check``
+(one line and exit status 2 when it is invalid).
 """
 from __future__ import annotations
 
