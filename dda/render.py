@@ -88,54 +88,92 @@ SPHERE_COLOURS = np.array([[0.80, 0.74, 0.60], [0.85, 0.20, 0.20], [0.25, 0.65, 
 
 
 def render_png(sim, path, width=1600, height=1100, title=None):
-    """Off-screen PNG of the blocks of a block Simulation."""
+    """Off-screen PNG of the blocks of a block Simulation (moving blocks coloured by their displacement)."""
+    t = getattr(sim, "time", None)
+    if title and t is not None:
+        title = f"{title}   t = {float(t):.4g} s"
     render_meshes(path, blocks=block_polydata(sim), width=width, height=height, title=title)
 
 
-def render_meshes(path, blocks=None, spheres=None, width=1600, height=1100, title=None):
-    """Off-screen PNG: `blocks` (faces_polydata) drawn as polyhedra, `spheres` (sphere_polydata) drawn as
-    spheres of their radius, coloured by their `colour` point data where present."""
+def _magnitude(a):
+    a = np.asarray(a, float)
+    return np.linalg.norm(a, axis=1) if a.ndim == 2 else np.abs(a)
+
+
+def render_meshes(path, blocks=None, spheres=None, width=1600, height=1100, title=None, cmap="viridis"):
+    """Off-screen PNG of the state: `blocks` (faces_polydata) drawn as polyhedra, `spheres` (sphere_polydata)
+    drawn as spheres of their radius. What moves is coloured by its displacement from the start (cell data
+    ``displacement`` of the blocks, point data of the spheres) on one scale with a colour bar in metres; fixed
+    blocks and spheres are grey. Legend, axes in metres, scale bar and a camera fitted to everything drawn as
+    for sgim pictures (sgim.render.Frame). Returns the picture's facts (legend, colour range, scale bar)."""
     import pyvista as pv
 
-    from sgim.render import offscreen_vtk
+    from sgim.render import Frame
 
-    pv.OFF_SCREEN = True
-    with offscreen_vtk():  # no X server tried, no warning on the terminal
-        pl = pv.Plotter(off_screen=True, window_size=(int(width), int(height)))
-    pl.set_background("white")
-    bounds = []
+    frame = Frame(width, height, title)
+    pl = frame.pl
+    parts, bounds = [], []
     if blocks is not None and blocks.n_points:
         mesh = blocks.copy()
-        colours = np.where(mesh.cell_data["fixed"][:, None] == 1, FIXED, MOVING)
-        mesh.cell_data["rgb"] = (colours * 255).astype(np.uint8)
-        pl.add_mesh(mesh, scalars="rgb", rgb=True, show_edges=True, edge_color="black", line_width=0.5)
+        fixed = np.asarray(mesh.cell_data["fixed"]) == 1
+        disp = _magnitude(mesh.cell_data["displacement"]) if "displacement" in mesh.cell_data \
+            else np.zeros(mesh.n_cells)
+        mesh.cell_data["displacement_m"] = disp
+        parts.append(("block", mesh, fixed, disp))
         bounds.append(np.asarray(mesh.bounds))
     if spheres is not None and spheres.n_points:
         pts = spheres.copy()
-        col = pts.point_data["colour"] if "colour" in pts.point_data else np.zeros(pts.n_points, int)
-        rgb = SPHERE_COLOURS[np.clip(col, 0, len(SPHERE_COLOURS) - 1)]
-        if "fixed" in pts.point_data:
-            rgb = np.where(pts.point_data["fixed"][:, None] == 1, 0.6 * rgb, rgb)
-        pts.point_data["rgb"] = (rgb * 255).astype(np.uint8)
-        pts.point_data["diameter"] = 2.0 * pts.point_data["radius"]
-        glyphs = pts.glyph(scale="diameter", orient=False, geom=pv.Sphere(radius=0.5, theta_resolution=16,
-                                                                          phi_resolution=12))
-        pl.add_mesh(glyphs, scalars="rgb", rgb=True)
-        bounds.append(np.asarray(glyphs.bounds))
-    if title:
-        pl.add_text(title, font_size=10, color="black")
+        fixed = (np.asarray(pts.point_data["fixed"]) == 1) if "fixed" in pts.point_data else np.zeros(pts.n_points,
+                                                                                                       bool)
+        disp = _magnitude(pts.point_data["displacement"]) if "displacement" in pts.point_data \
+            else np.zeros(pts.n_points)
+        pts.point_data["displacement_m"] = disp
+        pts.point_data["diameter"] = 2.0 * np.asarray(pts.point_data["radius"], float)
+        r = float(np.max(pts.point_data["radius"]))
+        b = np.asarray(pts.bounds, float)
+        bounds.append(b + np.array([-r, r, -r, r, -r, r]))
+        parts.append(("sphere", pts, fixed, disp))
     if bounds:
         b = np.array(bounds)
         lo, hi = b[:, 0::2].min(0), b[:, 1::2].max(0)
     else:
         lo, hi = np.zeros(3), np.ones(3)
-    centre = (lo + hi) / 2
-    span = float(np.max(hi - lo)) or 1.0
-    az, el = np.radians(-60.0), np.radians(25.0)
-    eye = centre + 2.2 * span * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-    pl.camera_position = [tuple(eye), tuple(centre), (0.0, 0.0, 1.0)]
-    pl.reset_camera()
-    tmp = f"{path}.tmp{os.getpid()}.png"
-    pl.screenshot(tmp)
-    pl.close()
-    os.replace(tmp, path)
+    frame.fit(lo, hi, azimuth=-60.0, elevation=25.0)
+    frame.axes(lo, hi)
+    moving = [d[~f] for _, _, f, d in parts if np.any(~f)]
+    dmax = float(max((m.max() for m in moving), default=0.0))
+    clim = (0.0, dmax if dmax > 0 else 1e-9)
+    bar_mapper = None
+    sphere_geom = pv.Sphere(radius=0.5, theta_resolution=16, phi_resolution=12)
+    for kind, mesh, fixed, disp in parts:
+        sub_fixed = sub_moving = None
+        if kind == "block":
+            if fixed.any():
+                sub_fixed = mesh.extract_cells(np.flatnonzero(fixed)).extract_surface(algorithm=None)
+            if (~fixed).any():
+                sub_moving = mesh.extract_cells(np.flatnonzero(~fixed)).extract_surface(algorithm=None)
+            style = dict(show_edges=True, edge_color="black", line_width=0.5)
+        else:
+            glyphs = {}
+            for name, sel in (("fixed", fixed), ("moving", ~fixed)):
+                if sel.any():
+                    cloud = pv.PolyData(np.asarray(mesh.points)[sel])
+                    cloud.point_data["diameter"] = np.asarray(mesh.point_data["diameter"])[sel]
+                    cloud.point_data["displacement_m"] = disp[sel]
+                    glyphs[name] = cloud.glyph(scale="diameter", orient=False, geom=sphere_geom)
+            sub_fixed, sub_moving = glyphs.get("fixed"), glyphs.get("moving")
+            style = {}
+        if sub_fixed is not None:
+            pl.add_mesh(sub_fixed, color=FIXED, **style)
+            frame.add_legend_entry(f"fixed {kind}", FIXED)
+        if sub_moving is not None:
+            act = pl.add_mesh(sub_moving, scalars="displacement_m", cmap=cmap, clim=clim, show_scalar_bar=False,
+                              **style)
+            bar_mapper = act.mapper
+    if bar_mapper is not None:
+        frame.colour_bar("displacement [m]", bar_mapper)
+    frame.save(path)
+    info = {"legend": [label for label, _ in frame.legend], "displacement_max_m": dmax,
+            "scale_bar_m": frame.scale_bar_m}
+    frame.close()
+    return info

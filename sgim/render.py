@@ -305,13 +305,15 @@ class Frame:
 
     def _draw_colour_bar(self):
         title, mapper = self._bar
-        top = self.panel_top - 2.6 * self.fs  # room for the title above the bar
+        self._panel_text(title, self.panel_top - 0.4 * self.fs)
+        top = self.panel_top - 2.6 * self.fs  # under the title, with room for the top label
         bottom = max(top - max(0.3 * self.H, 5 * self.fs), 4.5 * self.fs)
         self.bar_actor = self.pl.add_scalar_bar(
-            title=title, mapper=mapper, vertical=True, position_x=(self.W - self.panel_px + 0.5 * self.fs) / self.W,
-            position_y=bottom / self.H, width=1.8 * self.fs / self.W, height=(top - bottom) / self.H,
-            title_font_size=self.fs, label_font_size=self.fs, color="black", n_labels=4, fmt="%.3g",
+            title="", mapper=mapper, vertical=True, position_x=(self.W - self.panel_px + 0.5 * self.fs) / self.W,
+            position_y=bottom / self.H, width=(self.panel_px - 1.0 * self.fs) / self.W,
+            height=(top - bottom) / self.H, label_font_size=self.fs, color="black", n_labels=4, fmt="%.3g",
             unconstrained_font_size=True)
+        self.bar_actor.SetBarRatio(min(0.9, 1.8 * self.fs / (self.panel_px - 1.0 * self.fs)))
         self.panel_top = bottom
 
     def _scale_bar(self):
