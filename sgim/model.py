@@ -146,22 +146,59 @@ class SphereModel:
 
     # -- exports -------------------------------------------------------------
     def save_vtu(self, path):
-        """Point cloud (one vertex cell per sphere) with radius, colour and bond counts."""
-        import meshio
+        """ParaView file of the model (sgim/vtu.py, streamed: no copy of the bond list in memory).
 
+        Points: the sphere centres. Cells: one vertex cell per sphere (cell i is sphere i), then one line cell
+        per touching pair (cell n + b is bonds[b]). Point data: ``id`` (row in model.npz), ``radius``,
+        ``colour`` (0 intact, 1 red, 2 green, 3 blue), ``colour_source``, ``bonds`` (intact bonds),
+        ``member_count`` and, MAX_MEMBERS columns wide (-1 / 0 / NaN padded, the lowest discontinuity indices
+        first), ``member_disc``, ``member_kind`` (1 inside, 2 green side, 3 blue side), ``member_offset``.
+        Cell data: ``cell_kind`` (0 sphere, 1 bond), ``bonded`` (1 bonded, 0 cut, -1 on sphere cells),
+        ``cut_by`` (the discontinuity index that cut the pair; -1 bonded, and on sphere cells)."""
+        from .vtu import array, constant, pieces, points_and_lines
+
+        n, m = self.n, len(self.bonds)
+        bonds = np.asarray(self.bonds, np.int64).reshape(-1, 2)
+        bonded = np.asarray(self.bonded, bool)
+        nb = (np.bincount(bonds[:, 0], weights=bonded, minlength=n)
+              + np.bincount(bonds[:, 1], weights=bonded, minlength=n)).astype(np.int32) if m else np.zeros(n, np.int32)
+        count, disc, kind, offset = self.membership_columns()
+        point_data = [array("id", np.arange(n, dtype=np.int64)), array("radius", np.asarray(self.radii, float)),
+                      array("colour", np.asarray(self.colour, np.int32)),
+                      array("colour_source", np.asarray(self.colour_source, np.int32)), array("bonds", nb),
+                      array("member_count", count), array("member_disc", disc), array("member_kind", kind),
+                      array("member_offset", offset)]
+        cut_by = np.asarray(self.cut_by, np.int32)
+        cell_data = [pieces("cell_kind", np.uint8, [(n, constant(0)), (m, constant(1))]),
+                     pieces("bonded", np.int8, [(n, constant(-1)), (m, lambda s, e: bonded[s:e])]),
+                     pieces("cut_by", np.int32, [(n, constant(-1)), (m, lambda s, e: cut_by[s:e])])]
+        with atomic_path(path) as tmp:
+            points_and_lines(tmp, self.centers, bonds, point_data, cell_data)
+
+    MAX_MEMBERS = 8
+
+    def membership_columns(self, width=None):
+        """The membership table as per-sphere columns: (count (n,) i4, disc (n, w) i4 padded -1, kind (n, w) i1
+        padded 0, offset (n, w) f8 padded NaN), w = min(MAX_MEMBERS, the largest count) (at least 1); each
+        sphere's rows by ascending discontinuity index (past w: counted, not listed)."""
         n = self.n
-        nb = np.bincount(self.bonds[self.bonded].ravel(), minlength=n) if len(self.bonds) else np.zeros(n, int)
-        mesh = meshio.Mesh(
-            self.centers,
-            [("vertex", np.arange(n, dtype=np.int64).reshape(-1, 1))],
-            point_data={
-                "radius": self.radii,
-                "colour": self.colour.astype(np.int32),
-                "colour_source": self.colour_source.astype(np.int32),
-                "bonds": nb.astype(np.int32),
-            },
-        )
-        atomic_vtu(path, mesh)
+        ms = np.asarray(self.member_sphere, np.int64)
+        count = np.bincount(ms, minlength=n).astype(np.int32) if len(ms) else np.zeros(n, np.int32)
+        w = int(width or max(1, min(self.MAX_MEMBERS, int(count.max()) if n else 1)))
+        disc = np.full((n, w), -1, np.int32)
+        kind = np.zeros((n, w), np.int8)
+        offset = np.full((n, w), np.nan)
+        if len(ms):
+            order = np.lexsort((np.asarray(self.member_disc), ms))
+            s = ms[order]
+            start = np.r_[0, np.cumsum(count)][:-1]
+            rank = np.arange(len(s)) - start[s]
+            keep = rank < w
+            o, s, rank = order[keep], s[keep], rank[keep]
+            disc[s, rank] = np.asarray(self.member_disc)[o]
+            kind[s, rank] = np.asarray(self.member_kind)[o]
+            offset[s, rank] = np.asarray(self.member_offset)[o]
+        return count, disc, kind, offset
 
     def save_text(self, balls_path, bonds_path):
         """PFC-style text: 'id x y z r colour' per ball, 'id1 id2 bonded cut_by' per contact (1-based ids)."""
