@@ -395,8 +395,9 @@ class _Syncer:
 class Table:
     """results.csv + results.jsonl, append-only, one fsynced write per row (see the module doc)."""
 
-    def __init__(self, outdir, param_paths, result_names):
+    def __init__(self, outdir, param_paths, result_names, case_ids=None):
         self.outdir = Path(outdir)
+        self.case_ids = None if case_ids is None else set(case_ids)
         self.columns = list(FIXED_COLUMNS) + [f"p:{p}" for p in param_paths] + list(result_names)
         self.param_paths = list(param_paths)
         self.result_names = list(result_names)
@@ -463,6 +464,8 @@ class Table:
         records = self._records()
         self.done, self.line_of = {}, {}
         for no, cells in records[1:]:
+            if self.case_ids is not None and cells[0] not in self.case_ids:
+                raise BadFile(self.csv_path, f"line {no}: case {cells[0]} is not a case of this study")
             self.done[cells[0]] = cells[1]
             self.line_of[cells[0]] = no
         jl = self._json_lines()
@@ -501,7 +504,7 @@ class Table:
         self.fjson.close()
         self._rewrite(self.csv_path, keep)
         self.done = {}
-        self.__init__(self.outdir, self.param_paths, self.result_names)
+        self.__init__(self.outdir, self.param_paths, self.result_names, self.case_ids)
 
     def add(self, case, row):
         rec = {"case_id": case.case_id, "status": row["status"], "error": row.get("error", ""),
@@ -705,7 +708,11 @@ def run_study(study, outdir, timeout=None, comm=None, progress=None, retry_faile
     local.start()  # its imports overlap with the set-up
     try:
         lock = _prepare(study, outdir, force=force, new_version=new_version)
-        table = Table(outdir, [p.path for p in study.params], study.results)
+        try:
+            table = Table(outdir, [p.path for p in study.params], study.results, [c.case_id for c in study.cases])
+        except BaseException:
+            lock.close()
+            raise
         ids = {c.case_id for c in study.cases}
         for cid, no in table.line_of.items():
             if cid not in ids:
