@@ -28,7 +28,8 @@ def cmd_export(args):
         if args.json:
             print(json.dumps(info, indent=2))
         return 0
-    overrides = {"duration": args.duration, "dt": args.dt, "record_every": args.record_every}
+    overrides = {"duration": args.duration, "dt": args.dt, "record_every": args.record_every,
+                 "viscous_damping": args.viscous_damping}
     info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say,
                   max_steps=positive_int(args.max_steps, "--max-steps"), force=args.force)
     if args.json:
@@ -106,6 +107,10 @@ def main(argv=None):
     p.add_argument("--duration", type=float, help="run length [s] (overrides the scene)")
     p.add_argument("--dt", type=float, help="time step [s] (overrides the scene)")
     p.add_argument("--record-every", type=float, help="record interval [s]")
+    p.add_argument("--viscous-damping", metavar="ZETA", help="a force -c v on every sphere (LIGGGHTS fix viscous), "
+                                                            "c for this ratio of critical damping of the model's "
+                                                            "first mode, or 'critical' (overrides [simulation] "
+                                                            "viscous_damping)")
     p.add_argument("--max-steps", metavar="N", help="refuse a deck of more than N steps (duration / dt; overrides "
                                                     "the scene's [simulation] max_steps, default 1e8)")
     p.add_argument("--json", action="store_true", help="print deck.json")

@@ -8,7 +8,7 @@
 - an sgim ``model.npz``: run with default settings;
 - a ``run.npz`` (a deck's SphereRun): as it is.
 
-``overrides`` (duration, dt, record_every) shorten or change the run. ``to`` is one of:
+``overrides`` (duration, dt, record_every, viscous_damping) shorten or change the run. ``to`` is one of:
 
 =========  ======================================================================
 yade       DECK/script.py + run.npz (JCFpm bonded spheres), or a Polyhedra deck
@@ -72,7 +72,7 @@ def load_source(source, overrides=None, max_steps=None, limit_steps=True):
                              limit_steps=limit_steps)
             model = _scene_model(path)
         else:
-            from sgim.build import build_model
+            from sgim.builder import build_model
             from sgim.scene import load_scene
 
             model = build_model(load_scene(path))
@@ -113,6 +113,17 @@ def _apply_overrides(run, ov, path):
     if "duration" in ov and "record_every" not in ov:
         run.record_every = run.duration / 100 if run.record_every > run.duration else run.record_every
     run.record_every = min(run.record_every, run.duration)
+    if "viscous_damping" in ov:  # --viscous-damping: a ratio of critical damping of the first mode, or critical
+        from .spec import viscous_coefficient
+
+        raw = ov["viscous_damping"]
+        try:
+            value = raw if str(raw).strip().lower() == "critical" else float(raw)
+            run.viscous_damping = viscous_coefficient(run, value)
+        except ValueError as exc:
+            msg = str(exc) if "damping" in str(exc) or "mode" in str(exc) else \
+                'must be a ratio of critical damping or "critical"'
+            raise DeckError(f"{path}: --viscous-damping = {raw!r}: {msg}") from None
 
 
 def export(source, to, out, variant=None, overrides=None, progress=None, max_steps=None, force=False):

@@ -3,12 +3,13 @@
 ``run_inhouse(run, out=None, progress=None)`` builds the SphereSet and SphereSimulation of the run
 (``run.in_house()``: bonds in run.bond_i/j order with their kn, ks, ft, fs and rest lengths, the cut pairs on
 joints as smooth joints with run.joint_normal and run.joint_friction_deg when run.smooth_joints, the contact
-law, gravity, run.dt, Cundall local damping, the constant sphere forces run.force and the prescribed
-velocities run.velocity of run.prescribed), steps it run.steps times and records every run.record_steps
+law, gravity, run.dt, Cundall local damping, viscous bond damping run.bond_zeta, the constant sphere forces
+run.force and the prescribed velocities run.velocity of run.prescribed), steps it run.steps times and records every run.record_steps
 steps (first record at t = 0): series ``kinetic`` (translational + rotational energy of the free spheres [J])
 and ``bonds_intact``, positions when n * records <= 5e6, and the final positions, velocities and bond states.
-The in-house engine does every feature of the run exactly (it is the reference the decks are compared with),
-so ``extra["approximations"]`` is empty; ``extra`` also holds the set-up time, the stepping CPU time (``cpu_s``)
+The in-house engine does every feature of the run exactly (it is the reference the decks are compared with)
+except a viscous damping of the spheres' velocities (run.viscous_damping, LIGGGHTS' fix viscous), which
+``extra["approximations"]`` then names; ``extra`` also holds the set-up time, the stepping CPU time (``cpu_s``)
 and the pair-list rebuilds.
 
 The engine's cost depends on how its arrays are laid out in memory: the run is stepped with its spheres
@@ -63,11 +64,21 @@ def reordered(run, perm):
                   colour=np.asarray(run.colour)[perm], fixed=np.asarray(run.fixed, bool)[perm], bond_i=bi, bond_j=bj,
                   bond_len0=np.asarray(run.bond_len0)[border], bond_kn=np.asarray(run.bond_kn)[border],
                   bond_ks=np.asarray(run.bond_ks)[border], bond_ft=np.asarray(run.bond_ft)[border],
-                  bond_fs=np.asarray(run.bond_fs)[border], joint_i=ji, joint_j=jj,
+                  bond_fs=np.asarray(run.bond_fs)[border], bond_zeta=np.asarray(run.bond_zeta, float)[border],
+                  joint_i=ji, joint_j=jj,
                   joint_disc=np.asarray(run.joint_disc)[jorder], joint_normal=normal, cut_i=ci, cut_j=cj,
                   force=np.asarray(run.force, float)[perm], prescribed=np.asarray(run.prescribed, bool)[perm],
                   velocity=np.asarray(run.velocity, float)[perm])
     return new, border
+
+
+def approximations(run):
+    """What the in-house engine does not represent of `run`: strings naming the scene key (RunResult.extra)."""
+    out = []
+    if run.viscous_damping > 0:
+        out.append(f"simulation.viscous_damping (c = {run.viscous_damping:g} N s/m on every sphere, LIGGGHTS' fix "
+                   "viscous) not represented: the in-house engine damps with simulation.local_damping")
+    return out
 
 
 def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
@@ -110,7 +121,8 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
                         final_vel=last["vel"], bond_intact=last["intact"], time=np.asarray(times, float), pos=pos,
                         series={"kinetic": np.asarray(kin, float), "bonds_intact": np.asarray(nbond, np.int64)},
                         status=status, message=message, steps=int(last["step"]), dt=float(run.dt), wall_s=wall,
-                        extra={"approximations": [], "setup_s": setup_s, "cpu_s": time.process_time() - c0,
+                        extra={"approximations": approximations(run), "setup_s": setup_s,
+                               "cpu_s": time.process_time() - c0,
                                "pair_list_builds": int(sim.stats[7]),
                                "smooth_joints": int(ss.n_joints), "threads": 1})
         if out is not None:
@@ -139,4 +151,4 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
     return result(COMPLETE, "", time.perf_counter() - t0)
 
 
-__all__ = ["run_inhouse"]
+__all__ = ["approximations", "run_inhouse"]

@@ -61,10 +61,12 @@ What LIGGGHTS-PUBLIC cannot do exactly (listed per run in RunResult.extra["appro
 - bond breakage is checked by the runner between chunks of run.record_steps steps (run.extra
   ``liggghts_check_steps`` for a shorter check), not every step;
 - no smooth joint: joint pairs are plain contacts along the centre line (with the joint friction);
-- Cundall's local damping does not exist in LIGGGHTS-PUBLIC: runs are undamped unless run.extra
-  ``liggghts_viscous`` = gamma [kg/s] adds ``fix viscous`` (force -gamma v on absolute velocities, so it also
-  slows free flight; deck.json ``viscous_gamma_equivalent`` gives the gamma with the same loss per cycle at the
-  mean sphere's frequency);
+- Cundall's local damping does not exist in LIGGGHTS-PUBLIC: runs are undamped unless run.viscous_damping
+  ([simulation] viscous_damping: a ratio of critical damping of the model's first mode, or "critical";
+  ``adapters export --viscous-damping``) or run.extra ``liggghts_viscous`` = gamma [kg/s] adds ``fix viscous``
+  (force -gamma v on absolute velocities, so it also slows free flight; deck.json ``viscous_gamma_equivalent``
+  gives the gamma with the same loss per cycle at the mean sphere's frequency);
+- bonds have no damping (run.bond_zeta, [spheres] bond_damping, is listed as not represented);
 - the Coulomb limit uses the damped normal force (in-house: the elastic one).
 
 Results (RunResult, engine "liggghts"): records every run.record_steps steps from t = 0 (series "kinetic":
@@ -268,13 +270,34 @@ def check_steps(run: SphereRun):
     return max(1, min(c, run.record_steps))
 
 
+# the bond keys of a DDA scene's [spheres] table: what the sjkr and clumps variants do not use
+BOND_KEYS = ("spheres.bond_young, spheres.bond_kn, spheres.bond_ks, spheres.bond_shear_ratio, spheres.bond_tensile, "
+             "spheres.bond_shear, spheres.bond_damping, spheres.bond_radius_factor")
+# run.npz fields the runner reads besides the deck's data and in files, per variant (bond breakage)
+RUNNER_FIELDS = {"bonds": ("bond_ft",), "sjkr": (), "clumps": ()}
+
+
+def viscous(run: SphereRun):
+    """The fix viscous coefficient [kg/s] of the deck: run.viscous_damping ([simulation] viscous_damping), else
+    run.extra ``liggghts_viscous`` (a stand-in for the local damping of the other engines), else 0."""
+    if run.viscous_damping > 0:
+        return float(run.viscous_damping)
+    return float(run.extra.get("liggghts_viscous", 0.0))
+
+
 def approximations(run: SphereRun, variant):
-    """What this deck cannot represent exactly (strings for RunResult.extra["approximations"])."""
+    """What this deck cannot represent exactly (strings for RunResult.extra["approximations"]), naming the scene
+    keys they concern."""
     out = []
     if variant == "bonds" and run.n_bonds:
-        out.append("bonds are central springs (bond_style harmonic): no shear spring, no bending, no bond damping")
+        out.append("bonds are central springs (bond_style harmonic): no shear spring (spheres.bond_ks, "
+                   "spheres.bond_shear_ratio not represented), no bending")
+        zeta = np.asarray(run.bond_zeta, float)
+        if np.any(zeta > 0):
+            out.append(f"spheres.bond_damping = {float(zeta.max()):g} not represented: harmonic bonds have no "
+                       "damping")
         if np.any(np.isfinite(run.bond_fs)):
-            out.append("bond shear strength (bond_fs) not applied: harmonic bonds carry no shear force")
+            out.append("spheres.bond_shear (bond_fs) not applied: harmonic bonds carry no shear force")
         if np.any(np.isfinite(run.bond_ft)):
             out.append(f"bond tension breakage checked by the runner every {check_steps(run)} steps "
                        "(delete_bonds between chunks), not every step")
@@ -282,28 +305,32 @@ def approximations(run: SphereRun, variant):
     if variant == "sjkr":
         out.append("no bonds: SJKR adhesion per colour type pair (acts only while spheres overlap, re-forms on "
                    "new contacts, never breaks); Hertzian contacts instead of linear springs")
+        out.append(f"not used without bonds: {BOND_KEYS}")
         out.append("green-blue pairs are non-cohesive whichever joint they belong to")
     if variant == "clumps":
         out.append("bonded components are rigid bodies (fix rigid molecule): no bond deformation or breakage")
+        out.append(f"not used by rigid bodies: {BOND_KEYS}")
+        if np.any(np.asarray(run.fixed, bool)):
+            out.append("components with a fixed sphere are fixed as a whole (spheres.fixed, spheres.fixed_below)")
         if np.any(np.asarray(run.prescribed, bool) & ~np.asarray(run.fixed, bool)):
             out.append("a bonded component with a prescribed sphere moves at its velocity as a whole")
     if variant == "bonds" and bond_gap(run) > 0:
         out.append(f"contact radius r (1 - {bond_gap(run):g}) (masses kept): bonded pairs get the granular "
                    f"contact only beyond a compressive strain of about {2 * bond_gap(run):g}")
-        out.append("components with a fixed sphere are fixed as a whole")
     if len(run.joint_i) and run.smooth_joints:
-        out.append("no smooth joint: joint pairs are plain contacts along the centre line (joint friction on "
-                   "green-blue type pairs)")
+        out.append("spheres.smooth_joints not represented (LIGGGHTS-PUBLIC has no smooth joint): joint pairs are "
+                   "plain contacts along the centre line (joint friction on green-blue type pairs)")
     if run.damping > 0:
         out.append("contact damping with the effective mass of the mean sphere; Coulomb limit on the damped "
                    "normal force")
-    if run.local_damping > 0 and "liggghts_viscous" not in run.extra:
-        out.append(f"Cundall local damping {run.local_damping:g} not represented (LIGGGHTS-PUBLIC has none): "
-                   "run undamped (run.extra liggghts_viscous = gamma [kg/s] adds fix viscous)")
-    if "liggghts_viscous" in run.extra:
-        out.append(f"viscous damping fix viscous {float(run.extra['liggghts_viscous']):g} kg/s on absolute "
-                   "velocities (also slows free fall: terminal velocity m g / gamma)"
-                   + (f" instead of Cundall local damping {run.local_damping:g}" if run.local_damping > 0 else ""))
+    c = viscous(run)
+    if run.local_damping > 0:
+        out.append(f"simulation.local_damping = {run.local_damping:g} (Cundall) not represented: LIGGGHTS-PUBLIC "
+                   "has none; " + (f"fix viscous {c:g} kg/s damps the run instead" if c > 0 else
+                                   "the run is undamped (simulation.viscous_damping adds fix viscous)"))
+    if c > 0:
+        out.append(f"viscous damping fix viscous {c:g} kg/s acts on absolute velocities (also slows free fall: "
+                   "terminal velocity m g / c)")
     return out
 
 
@@ -448,8 +475,8 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     L.append("fix integrate single nve/sphere")
     if variant == "clumps" and n_bodies:
         L.append("fix bodies clump rigid molecule")
-    if "liggghts_viscous" in run.extra:
-        L.append(f"fix viscous all viscous {float(run.extra['liggghts_viscous']):.17g}")
+    if viscous(run) > 0:
+        L.append(f"fix viscous all viscous {viscous(run):.17g}")
     L += [f"timestep {run.dt:.17g}", "variable natoms equal atoms",
           "thermo_style custom step atoms ke", f"thermo {max(run.record_steps, 1)}",
           "thermo_modify lost ignore norm no",

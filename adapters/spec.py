@@ -6,8 +6,8 @@ in-house (dda.spheres), in YADE or in LIGGGHTS:
 - spheres: ``centers`` (n, 3), ``radii``, ``colour`` (sgim colour code), ``fixed`` (n,) bool, ``density``;
 - bonds: only the pairs the model marks ``bonded``: ``bond_i < bond_j``, rest length ``bond_len0``, normal and
   shear stiffness ``bond_kn`` / ``bond_ks`` [N/m], breaking forces ``bond_ft`` (tension) / ``bond_fs`` (shear)
-  [N] (inf: unbreakable); the stiffness and strength follow dda.spheres.BondLaw (bond area pi (f min r)^2,
-  kn = E A / L0);
+  [N] (inf: unbreakable), ``bond_zeta`` viscous bond damping (ratio of critical, [spheres] bond_damping); the
+  stiffness and strength follow dda.spheres.BondLaw (bond area pi (f min r)^2, kn = E A / L0);
 - joints: the touching pairs the model marks cut by a zero-thickness discontinuity (a disc or a triangulated
   surface without thickness): ``joint_i < joint_j``, ``joint_disc`` (the discontinuity index) and
   ``joint_normal`` (n, 3): the discontinuity's unit normal at the pair, signed to point from sphere i to
@@ -15,7 +15,10 @@ in-house (dda.spheres), in YADE or in LIGGGHTS:
   ``joint_friction_deg``); pairs cut by a fault (thickness > 0) are plain frictional contacts;
 - the contact law of every unbonded contact: ``kn``, ``ks`` [N/m], ``friction_deg``, ``damping`` (ratio of
   critical, viscous), and the run: ``gravity``, ``dt`` (one step for every engine), ``duration``,
-  ``record_every``, ``local_damping`` (Cundall's non-viscous damping, as YADE's NewtonIntegrator.damping);
+  ``record_every``, ``local_damping`` (Cundall's non-viscous damping, as YADE's NewtonIntegrator.damping),
+  ``viscous_damping`` (a force -c v on every free sphere, c [N s/m] the same for all: LIGGGHTS' ``fix
+  viscous``; [simulation] viscous_damping gives it as a ratio of critical damping of the model's first mode,
+  :func:`viscous_coefficient`);
 - loads: ``force`` (n, 3) a constant force on each sphere [N] (added to its weight; no effect on fixed or
   prescribed spheres), ``prescribed`` (n,) bool and ``velocity`` (n, 3) [m/s]: prescribed spheres move at
   their velocity whatever the forces and do not turn (a platen; ``velocity`` is ignored elsewhere). A sphere
@@ -37,7 +40,18 @@ import numpy as np
 ARRAYS = ("centers", "radii", "colour", "fixed", "bond_i", "bond_j", "bond_len0", "bond_kn", "bond_ks", "bond_ft",
           "bond_fs", "joint_i", "joint_j", "joint_disc", "joint_normal", "cut_i", "cut_j", "gravity")
 ARRAYS += ("force", "prescribed", "velocity")  # loads; optional in run.npz files (absent: none)
-OPTIONAL_ARRAYS = ("force", "prescribed", "velocity")
+ARRAYS += ("bond_zeta",)  # viscous bond damping; optional in run.npz files (absent: undamped bonds)
+OPTIONAL_ARRAYS = ("force", "prescribed", "velocity", "bond_zeta")
+
+# Scene keys that no deck carries, and why (every other [simulation] and [spheres] key of dda/scene.py reaches
+# every engine that can express it, or is named in that engine's extra["approximations"]; tests/test_scene_keys.py)
+NOT_RUN_KEYS = {
+    "simulation.frames": "the number of VTU frames `dda run` writes (output, not physics)",
+    "simulation.max_steps": "a limit checked when the deck is written (a longer run is refused), not physics",
+    "simulation.sleep": "resting blocks stop being integrated: blocks only (sphere decks have no blocks)",
+    "simulation.sleep_velocity": "see simulation.sleep", "simulation.sleep_accel": "see simulation.sleep",
+    "simulation.sleep_steps": "see simulation.sleep",
+}
 
 
 class SpecError(ValueError):
@@ -81,9 +95,13 @@ class SphereRun:
     force: np.ndarray | None = None       # (n, 3) constant force on each sphere [N] (None: zeros)
     prescribed: np.ndarray | None = None  # (n,) bool: moves at `velocity` whatever the forces (None: none)
     velocity: np.ndarray | None = None    # (n, 3) velocity of the prescribed spheres [m/s] (None: zeros)
+    bond_zeta: np.ndarray | None = None   # (m,) viscous bond damping, ratio of critical (None: zeros)
+    viscous_damping: float = 0.0          # c [N s/m]: a force -c v on every free sphere (LIGGGHTS fix viscous)
 
     def __post_init__(self):
         n = len(np.asarray(self.radii).reshape(-1))
+        m = len(np.asarray(self.bond_i).reshape(-1))
+        self.bond_zeta = np.zeros(m) if self.bond_zeta is None else np.asarray(self.bond_zeta, float).reshape(-1)
         self.force = np.zeros((n, 3)) if self.force is None else np.asarray(self.force, float).reshape(-1, 3)
         self.prescribed = (np.zeros(n, bool) if self.prescribed is None
                            else np.asarray(self.prescribed, bool).reshape(-1))
@@ -142,7 +160,7 @@ class SphereRun:
 
 
 HEADER = ("name", "density", "kn", "ks", "friction_deg", "damping", "joint_friction_deg", "smooth_joints", "dt",
-          "duration", "record_every", "local_damping", "source", "extra")
+          "duration", "record_every", "local_damping", "source", "extra", "viscous_damping")
 
 
 def check_run(path, arrays):
@@ -165,7 +183,7 @@ def check_run(path, arrays):
           "smooth_joints": F.boolean("smooth_joints"), "dt": F.number("dt", positive=True),
           "duration": F.number("duration", positive=True), "record_every": F.number("record_every", positive=True),
           "local_damping": F.number("local_damping", lo=0, hi=1), "source": F.string("source", ""),
-          "extra": F.obj("extra", {})}
+          "extra": F.obj("extra", {}), "viscous_damping": F.number("viscous_damping", 0.0, nonneg=True)}
     c = kw["centers"] = A.real("centers", (None, 3))
     n = len(c)
     sph, one = f"the run has {n} spheres", "one per sphere of centers"
@@ -187,6 +205,8 @@ def check_run(path, arrays):
     kw["bond_ks"] = A.real("bond_ks", (m,), nonneg=True, per=per)
     kw["bond_ft"] = A.real("bond_ft", (m,), nonneg=True, allow_inf=True, per=per)
     kw["bond_fs"] = A.real("bond_fs", (m,), nonneg=True, allow_inf=True, per=per)
+    if A.has("bond_zeta"):
+        kw["bond_zeta"] = A.real("bond_zeta", (m,), nonneg=True, hi=1.0, per=per)
     k, per = len(kw["joint_i"]), "one per joint pair of joint_i"
     kw["joint_disc"] = A.integer("joint_disc", (k,), lo=0, per=per, dtype=np.int32)
     kw["joint_normal"] = A.real("joint_normal", (k, 3), per=per)
@@ -213,7 +233,7 @@ def _sphere_set(run: SphereRun):
     ss.bond_len0 = run.bond_len0.astype(float)
     ss.bond_kn, ss.bond_ks = run.bond_kn.astype(float), run.bond_ks.astype(float)
     ss.bond_ft, ss.bond_fs = run.bond_ft.astype(float), run.bond_fs.astype(float)
-    ss.bond_zeta = np.zeros(run.n_bonds)
+    ss.bond_zeta = np.asarray(run.bond_zeta, float).copy()
     ss.body_force[:] = run.force
     ss.prescribed[:] = run.prescribed
     ss.velocity[:] = np.where(run.prescribed[:, None], run.velocity, 0.0)
@@ -232,10 +252,12 @@ def joint_pairs(model):
 def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None, friction_deg=30.0,
                damping=0.0, joint_friction_deg=None, smooth_joints=True, gravity=(0.0, 0.0, -9.81), dt=None,
                safety=0.5, duration=0.01, record_every=None, local_damping=0.0, name=None, source="",
-               force=None, prescribed=None, velocity=None):
+               force=None, prescribed=None, velocity=None, viscous_damping=0.0):
     """SphereRun of an sgim model (SphereModel or model.npz path). `bonds`: a dda.spheres.BondLaw (default
     BondLaw()); `fixed`: (n,) bool or None; dt None: `safety` times the in-house critical step. Loads: `force`
-    (n, 3) or (3,) [N] on each sphere, `prescribed` (n,) bool, `velocity` (n, 3) or (3,) [m/s] (None: none)."""
+    (n, 3) or (3,) [N] on each sphere, `prescribed` (n,) bool, `velocity` (n, 3) or (3,) [m/s] (None: none).
+    `viscous_damping`: ratio of critical damping of the model's first mode (a number >= 0, or "critical" = 1),
+    turned into the coefficient c [N s/m] of SphereRun.viscous_damping by :func:`viscous_coefficient`."""
     from dda.spheres import BondLaw, SphereSet, SphereSimulation
     from dda.simulation import ContactLaw
 
@@ -265,7 +287,7 @@ def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None
         joint_friction_deg=float(friction_deg if joint_friction_deg is None else joint_friction_deg),
         smooth_joints=bool(smooth_joints), gravity=np.asarray(gravity, float).reshape(3), dt=0.0,
         duration=float(duration), record_every=float(record_every or duration / 100),
-        local_damping=float(local_damping), source=str(source))
+        local_damping=float(local_damping), source=str(source), bond_zeta=ss.bond_zeta.copy())
     _set_loads(run, force, prescribed, velocity)
     if dt is None:
         sim = SphereSimulation(_sphere_set(run), ContactLaw(kn=run.kn, ks=run.ks, friction_deg=run.friction_deg,
@@ -274,7 +296,102 @@ def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None
     run.dt = float(dt)
     if not (run.dt > 0 and math.isfinite(run.dt)):
         raise SpecError(f"{source or 'model'}: time step must be > 0 (got {dt!r})")
+    if viscous_damping:
+        run.viscous_damping = viscous_coefficient(run, viscous_damping)
     return run
+
+
+def damping_ratio(value, what="viscous damping"):
+    """The ratio of critical damping `value` stands for: a number >= 0, or "critical" (1). ValueError otherwise."""
+    if isinstance(value, str):
+        if value.strip().lower() == "critical":
+            return 1.0
+        raise ValueError(f"{what} must be a ratio of critical damping >= 0 or \"critical\"")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0.0 <= float(value) <= 1e3):
+        raise ValueError(f"{what} must be a ratio of critical damping in 0..1e3 or \"critical\"")
+    return float(value)
+
+
+def held_spheres(run):
+    """(n,) bool: the free spheres that a path of bonds ties to a fixed sphere (the part of the model that has a
+    static equilibrium under its bonds)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = run.n
+    g = coo_matrix((np.ones(run.n_bonds), (run.bond_i, run.bond_j)), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    fixed = np.asarray(run.fixed, bool) | np.asarray(run.prescribed, bool)
+    anchored = np.zeros(lab.max() + 1 if n else 0, bool)
+    anchored[lab[fixed]] = True
+    return anchored[lab] & ~fixed
+
+
+def static_displacement(run, gravity=None):
+    """Static displacement (n, 3) of the run's bond network under its weight (`gravity`, default run.gravity):
+    the sparse linear solve of K u = m g over the spheres held by bonds (held_spheres; the others stay 0). Each
+    bond is a normal spring kn along its centre line plus a shear spring ks across it (central bonds: ks = 0;
+    rotations left out). Raises ValueError when the network is a mechanism (no finite solution)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import spsolve
+
+    n = run.n
+    i, j = np.asarray(run.bond_i, np.int64), np.asarray(run.bond_j, np.int64)
+    d = run.centers[j] - run.centers[i]
+    e = d / np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
+    ee = e[:, :, None] * e[:, None, :]
+    kn, ks = np.asarray(run.bond_kn, float), np.asarray(run.bond_ks, float)
+    blocks = kn[:, None, None] * ee + ks[:, None, None] * (np.eye(3)[None] - ee)  # (m, 3, 3)
+    rows, cols, vals = [], [], []
+    for a, b, s in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
+        for p in range(3):
+            for q in range(3):
+                rows.append(3 * a + p)
+                cols.append(3 * b + q)
+                vals.append(s * blocks[:, p, q])
+    K = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
+    K = K.tocsr()
+    mass = run.density * 4.0 / 3.0 * np.pi * run.radii ** 3
+    g = np.asarray(run.gravity if gravity is None else gravity, float)
+    f = (mass[:, None] * g[None, :]).ravel()
+    free = np.repeat(held_spheres(run), 3)
+    u = np.zeros(3 * n)
+    if free.any():
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            u[free] = spsolve(K[free][:, free].tocsc(), f[free])
+        if not np.all(np.isfinite(u)):
+            raise ValueError("the bond network is a mechanism (no static solution)")
+    return u.reshape(n, 3)
+
+
+def first_mode(run):
+    """(omega [rad/s], mean mass [kg]) of the run's first mode: the Rayleigh quotient of the static deflection
+    under gravity (static_displacement; downward if the run has no gravity) over the spheres held by bonds."""
+    g = np.asarray(run.gravity, float)
+    if not np.any(g):
+        g = np.array([0.0, 0.0, -9.81])
+    u = static_displacement(run, g)
+    held = held_spheres(run)
+    mass = run.density * 4.0 / 3.0 * np.pi * run.radii ** 3
+    work = float(np.sum(mass * (u @ g)))
+    uu = float(np.sum(mass * np.einsum("ij,ij->i", u, u)))
+    if not (held.any() and work > 0 and uu > 0):
+        raise ValueError("no sphere is tied by bonds to a fixed sphere: the model has no first mode")
+    return math.sqrt(work / uu), float(mass[held].mean())
+
+
+def viscous_coefficient(run, value):
+    """c [N s/m] of a force -c v on every free sphere that damps the run's first mode (first_mode) at the ratio
+    of critical damping `value` (a number, or "critical" = 1): c = 2 zeta m_mean omega_1. ValueError (a message
+    for the user) when the value is not a ratio or the model has no first mode."""
+    zeta = damping_ratio(value)
+    if zeta == 0.0:
+        return 0.0
+    omega, m = first_mode(run)
+    return 2.0 * zeta * m * omega
 
 
 def _set_loads(run, force, prescribed, velocity):
@@ -324,6 +441,12 @@ def from_scene(path, max_steps=None, duration=None, dt=None, limit_steps=True):
                          source=str(path), force=force, prescribed=prescribed, velocity=velocity)
     except SpecError as exc:
         raise SceneError(Path(path), "spheres.model", sp.get("path"), str(exc).split(": ", 1)[-1]) from None
+    vd = getattr(scene, "viscous_damping", 0.0)
+    if vd:
+        try:
+            run.viscous_damping = viscous_coefficient(run, vd)
+        except ValueError as exc:
+            raise SceneError(Path(path), "simulation.viscous_damping", vd, str(exc)) from None
     if limit_steps and all(v is None or v > 0 for v in (duration, dt)):  # bad overrides: _apply_overrides
         check_steps(run, path, max_steps, scene=scene, duration=duration, dt=dt)
     return run
@@ -352,4 +475,5 @@ def check_steps(run, path, max_steps=None, scene=None, duration=None, dt=None):
                  safety=scene.safety, **kw)
 
 
-__all__ = ["SphereRun", "SpecError", "check_run", "check_steps", "from_model", "from_scene", "joint_pairs"]
+__all__ = ["NOT_RUN_KEYS", "SphereRun", "SpecError", "check_run", "check_steps", "damping_ratio", "first_mode",
+           "from_model", "from_scene", "held_spheres", "joint_pairs", "static_displacement", "viscous_coefficient"]

@@ -38,13 +38,15 @@ gravity and Cundall's local damping by NewtonIntegrator (damping = run.local_dam
 Approximations (also listed in RunResult.extra["approximations"]):
 - bond shear failure is Mohr-Coulomb in JCFpm: |Fs| > FsMax + Fn tan(friction) (Fn < 0 in tension lowers the
   limit), where the in-house law breaks at |Fs| > bond_fs;
-- no viscous damping: neither at contacts (run.damping) nor on bonds;
+- no viscous damping: neither at contacts (run.damping), nor on bonds (run.bond_zeta), nor on the spheres
+  (run.viscous_damping);
 - bonds carry no bending or twisting moment (the shear force gives the torque at the contact point);
-- smooth joints exist for the model's joint pairs only (the pairs touching at the start): JCFpm switches a
-  joint pair off once it slid 2 min(r_i, r_j) along the joint (the script then erases it), and spheres that
-  meet across the joint later meet as plain frictional contacts (the in-house engine re-forms a joint pair
-  as a joint when its spheres overlap again). Interactions are kept while their spheres are apart
-  (neverErase), so that a joint pair opening for a moment stays a joint pair;
+- smooth joints exist for the model's joint pairs only (the pairs touching at the start). Interactions are
+  kept while their spheres are apart (neverErase), so that a joint pair that opens stays a joint pair with its
+  reference gap and pushes again as soon as it closes: the rule the in-house engine follows too
+  (dda/_spheres.py ``_joints``). JCFpm switches a joint pair off once it slid 2 min(r_i, r_j) along the
+  joint; the script erases it at the next record, and the two spheres meet later as a plain frictional
+  contact (in-house: from the next step);
 - a bond broken in shear under compression stays a frictional contact whose zero-force distance is the
   bond's rest distance (equal to touching for lattice packings).
 
@@ -70,14 +72,22 @@ OUTPUTS = ("yade_setup.json", "yade_series.npz", "yade_snapshot.npz", "yade_pos.
 
 
 def approximations(run: SphereRun):
+    """What this deck cannot represent exactly: strings naming the scene key they concern (RunResult.extra)."""
     out = ["bond shear failure is Mohr-Coulomb in JCFpm: |Fs| > bond_fs + Fn tan(friction), Fn < 0 in tension",
-           "bonds carry no bending or twisting moment",
-           "no viscous bond damping"]
+           "bonds carry no bending or twisting moment"]
+    zeta = np.asarray(run.bond_zeta, float)
+    if np.any(zeta > 0):
+        out.append(f"spheres.bond_damping = {float(zeta.max()):g} not represented: JCFpm bonds have no viscous "
+                   "damping (the bonds run undamped)")
     if run.damping > 0:
-        out.append(f"no viscous contact damping in JCFpm (run.damping = {run.damping:g} ignored)")
+        out.append(f"contact.damping = {run.damping:g} not represented: JCFpm has no viscous contact damping")
+    if run.viscous_damping > 0:
+        out.append(f"simulation.viscous_damping (c = {run.viscous_damping:g} N s/m on every sphere) not "
+                   "represented: YADE's NewtonIntegrator has Cundall's local damping only "
+                   "(simulation.local_damping)")
     if run.smooth_joints and len(run.joint_i):
-        out.append("smooth joints only for the model's joint pairs: a pair that slid 2 min(r) along the joint is "
-                   "switched off, and spheres meeting across the joint later are plain frictional contacts")
+        out.append("a smooth joint slid 2 min(r) along the joint is switched off at once, and erased (a plain "
+                   "contact from then on) at the next record; in-house it is a plain contact from the next step")
     return out
 
 

@@ -5,7 +5,10 @@ written. Keys::
 
     name = "incline"
     [simulation]   duration (s, required), dt (0 or absent: automatic), safety = 0.5, gravity = [0, 0, -9.81],
-                   local_damping = 0.0, record_every (default duration / 100), frames = 20 (VTU frames),
+                   local_damping = 0.0, viscous_damping = 0.0 (sphere decks: a force -c v on every sphere, c
+                   for this ratio of critical damping of the model's first mode, or "critical"; LIGGGHTS' fix
+                   viscous; the in-house engine and YADE list it as not represented), record_every (default
+                   duration / 100), frames = 20 (VTU frames),
                    sleep = false (resting blocks stop being integrated), sleep_velocity (m/s), sleep_accel
                    (m/s2), sleep_steps = 200 (see dda/simulation.py for the defaults), max_steps = 1e8 (a run
                    whose duration / dt passes it is refused before it starts; dda/limits.py)
@@ -69,6 +72,9 @@ TOP_KEYS |= {"report"}  # [[report]]: the answers the run states (dda/answers.py
 SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", "bond_shear_ratio", "bond_tensile",
                "bond_shear", "bond_damping", "bond_radius_factor", "joint_friction", "smooth_joints", "fixed_below"}
 SPHERE_KEYS |= {"load"}  # [[spheres.load]]: loaded regions (constant force or prescribed velocity)
+SIMULATION_KEYS = {"duration", "dt", "safety", "gravity", "local_damping", "record_every", "frames", "sleep",
+                   "sleep_velocity", "sleep_accel", "sleep_steps", "max_steps"}
+SIMULATION_KEYS |= {"viscous_damping"}  # sphere decks: -c v on every sphere (LIGGGHTS fix viscous; adapters/spec.py)
 SPHERE_LOAD_KEYS = {"region", "below", "force", "velocity"}
 LAW_KEYS = {"kn", "ks", "friction", "cohesion", "tensile", "damping"}
 # Numerical guards far beyond any rock or engine setting (the resource limits refuse the long runs that stiff or
@@ -115,6 +121,7 @@ class DDAScene:
     max_steps: int | None = None  # [simulation] max_steps or [limits] max_steps (None: dda.limits default)
     max_steps_key: str = "simulation.max_steps"
     reports: list = field(default_factory=list)  # [[report]]: dda.answers.Report (empty: the default answers)
+    viscous_damping: float = 0.0  # [simulation] viscous_damping: ratio of critical of the first mode (sphere decks)
 
     def build_spheres(self, max_steps=None, duration=None):
         """SphereSet and SphereSimulation of a scene with [spheres] (its blocks are fixed walls).
@@ -349,7 +356,7 @@ def _read_spheres(rd, data, path):
                                 **RATIO),
     )
     if mp.suffix.lower() == ".toml":  # an sgim scene: build its model in memory
-        from sgim.build import build_model
+        from sgim.builder import build_model
         from sgim.scene import load_scene
 
         model = build_model(load_scene(mp))  # a bad sgim scene raises its own one-line SceneError
@@ -457,6 +464,8 @@ def _law(rd, tab, key, base=None):
 
 
 def load_scene(path) -> DDAScene:
+    """The validated DDAScene of the scene file `path` (blocks, materials, contact laws, [spheres], run
+    settings); any problem raises sgim.scene.SceneError naming the file, key and value."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -483,8 +492,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
     name = rd.string(data, "name", "name", path.stem)
 
     st = rd.table(data, "simulation", "simulation", required=True)
-    rd.known(st, {"duration", "dt", "safety", "gravity", "local_damping", "record_every", "frames", "sleep",
-                  "sleep_velocity", "sleep_accel", "sleep_steps", "max_steps"}, "simulation")
+    rd.known(st, SIMULATION_KEYS, "simulation")
     max_steps, max_steps_key = _max_steps(rd, data, st)
     sleep = {"sleep": rd.boolean(st, "sleep", "simulation.sleep", False)}
     for k in ("sleep_velocity", "sleep_accel"):
@@ -497,6 +505,15 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
     safety = rd.number(st, "safety", "simulation.safety", default=0.5, positive=True, hi=1.0)
     gravity = rd.vector(st, "gravity", "simulation.gravity", default=(0.0, 0.0, -9.81))
     local_damping = rd.number(st, "local_damping", "simulation.local_damping", default=0.0, nonneg=True, hi=0.99)
+    viscous_damping = 0.0
+    if "viscous_damping" in st:
+        vd = st["viscous_damping"]
+        if isinstance(vd, str):
+            if vd != "critical":
+                rd.err("simulation.viscous_damping", vd, 'must be a ratio of critical damping or "critical"')
+            viscous_damping = 1.0
+        else:
+            viscous_damping = rd.number(st, "viscous_damping", "simulation.viscous_damping", nonneg=True, hi=1e3)
     record_every = rd.number(st, "record_every", "simulation.record_every", default=duration / 100, positive=True)
     if record_every > duration:
         rd.err("simulation.record_every", record_every, f"must not exceed simulation.duration = {duration:g}")
@@ -608,7 +625,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
         width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
         height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources,
         loads=loads, sleep=sleep, spheres=spheres, max_steps=max_steps, max_steps_key=max_steps_key,
-        reports=reports)
+        reports=reports, viscous_damping=viscous_damping)
 
 
 def _max_steps(rd, data, st):
