@@ -8,4 +8,37 @@
 - inhouse.py: the same run with the in-house engine (dda.spheres)
 - process.py: engine subprocesses (time limit, error line); result.py: RunResult
 - cli.py: ``adapters export`` and ``adapters run``
+
+The Python API (docs/api.md)::
+
+    import adapters
+    info = adapters.export("cases/crossval/column.toml", "yade", "deck")   # deck.json as a dict
+    res = adapters.run("deck")                   # a RunResult (time, positions, bonds intact, ...), saved in deck/result
+    res = adapters.run_inhouse(adapters.SphereRun.load("deck/run.npz"))   # the same run, in-house
+    same = adapters.load_result("deck/result")
+
+Names are imported from their modules when first used: ``import adapters`` stays light.
 """
+
+__all__ = ["export", "run", "run_inhouse", "load_result", "SphereRun", "RunResult", "DeckError"]
+_WHERE = {"export": "deck", "run": "deck", "DeckError": "deck", "run_inhouse": "inhouse", "SphereRun": "spec",
+          "RunResult": "result"}
+
+
+def load_result(folder):
+    """The RunResult saved in a result folder (result.npz and result.json) by ``adapters run``."""
+    from .result import RunResult
+
+    return RunResult.load(folder)
+
+
+def __getattr__(name):
+    if name in _WHERE:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'adapters' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

@@ -30,6 +30,10 @@ COMPLETE, INCOMPLETE = "complete", "incomplete"
 
 @dataclass
 class RunResult:
+    """One engine's result of a SphereRun, the same for YADE, LIGGGHTS and the in-house engine: initial and
+    final positions, recorded positions and times, bond states, scalar series, completion status (the
+    module docstring lists the arrays of result.npz)."""
+
     engine: str
     x0: np.ndarray
     final_pos: np.ndarray

@@ -60,6 +60,9 @@ class SpecError(ValueError):
 
 @dataclass
 class SphereRun:
+    """The engine-neutral description of a bonded-sphere run (run.npz): spheres, fixed and loaded ones, the
+    per-pair bonds and smooth joints, contact law, time step and duration, written to every engine's deck."""
+
     name: str
     centers: np.ndarray
     radii: np.ndarray

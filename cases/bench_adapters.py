@@ -54,7 +54,7 @@ DENSITY = {"fcc": 0.7405, "random": 0.62}  # solid fraction of sgim's packings (
 def deck_model(n_target, packing="fcc", radius=RADIUS):
     """sgim model of about n_target spheres in a cube (FCC lattice or sgim's random packing), every touching
     pair bonded."""
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     side = (n_target * 4.0 / 3.0 * math.pi * radius ** 3 / DENSITY[packing]) ** (1.0 / 3.0)

@@ -96,7 +96,7 @@ def mesh_rows(quick):
 
 
 def case_rows(quick):
-    from sgim.build import Timer, build_model
+    from sgim.builder import Timer, build_model
     from sgim.scene import load_scene
 
     scene_path = HERE / "tunnel_jointed.toml"

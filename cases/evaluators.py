@@ -23,7 +23,7 @@ name              what it does / the scalars it returns
                   ``fs_hb``, ``phi_crit_hb``, ``error_fs`` = fs_dda / fs_hb - 1, ``error_phi`` = phi_crit_dda /
                   phi_crit_hb - 1, ``wedge``, ``trials``, ``steps_per_trial``, ``run_s`` (wall time of the
                   search). A case whose joints form no wedge returns ``wedge`` = 0 and NaN elsewhere.
-``sgim-build``    builds the sgim scene (``sgim.build.build_model``): ``spheres``, ``red``, ``green``, ``blue``,
+``sgim-build``    builds the sgim scene (``sgim.builder.build_model``): ``spheres``, ``red``, ``green``, ``blue``,
                   ``red_fraction``, ``fractures`` (discontinuities incl. the sampled network), ``bonded``,
                   ``packing_density`` (random packings; NaN for lattices), ``detached_clusters``,
                   ``detached_spheres``, ``largest_detached`` (see :func:`detached_clusters`), ``build_s``.
@@ -288,7 +288,7 @@ SGIM_RESULTS = ("spheres", "red", "green", "blue", "red_fraction", "fractures", 
 
 def sgim_build(scene_path, case_dir, params):
     """Build the sgim scene and count colours and detached clusters (see the module docstring)."""
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import load_scene
 
     scene = load_scene(scene_path)

@@ -21,6 +21,9 @@ import numpy as np
 
 @dataclass
 class BlockSpec:
+    """One convex block as a scene gives it: vertices, faces (counter-clockwise seen from outside), name,
+    material, fixed / prescribed flags, initial velocities, body force and degrees of freedom (6 or 12)."""
+
     vertices: np.ndarray            # (n,3) float64, world coordinates, convex polyhedron
     faces: list[list[int]]          # vertex indices per face, counter-clockwise seen from outside (outward normal)
     name: str = ""

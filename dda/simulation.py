@@ -74,6 +74,9 @@ NPOINT = 8  # contact points assumed in parallel on one block (a block held betw
 
 @dataclass
 class ContactLaw:
+    """Contact law of block (and sphere) contact points: normal and shear stiffness kn, ks [N/m per point],
+    Coulomb friction [deg], cohesion and tensile strength [Pa], damping [ratio of critical]."""
+
     kn: float = 1e9
     ks: float | None = None  # default kn / 2
     friction_deg: float = 30.0
@@ -101,6 +104,10 @@ class BlowUpError(RuntimeError):
 
 
 class Simulation:
+    """Explicit DDA run of a BlockSystem: central differences, the uniform-grid broad phase, Fast Common-Plane
+    contacts with the ContactLaw (per material pair with `pair_laws`), gravity, local damping and sleeping
+    blocks. ``run(duration)`` advances it and returns the recorded Results (dda/results.py)."""
+
     def __init__(self, system, law: ContactLaw | None = None, gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5,
                  local_damping=0.0, pair_laws=None, cell_factor=1.5, blowup_ratio=0.5, sleep=False,
                  sleep_velocity=None, sleep_accel=None, sleep_steps=200, on_dt=None):

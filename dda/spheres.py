@@ -75,6 +75,9 @@ from .simulation import BlowUpError, ContactLaw
 
 @dataclass
 class BondLaw:
+    """Bonds between sphere pairs: stiffness from a bond modulus (or kn / ks directly), the shear ratio,
+    tensile and shear strengths [Pa] (a bond breaks past either), damping and the bond radius factor."""
+
     young: float | None = 1e9      # bond modulus [Pa] (kn = young A / L0), unless kn is given
     shear_ratio: float = 0.4       # ks / kn, unless ks is given; 0: central bonds (normal spring only)
     tensile: float = math.inf      # tensile strength [Pa] on the bond area

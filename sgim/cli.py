@@ -59,7 +59,7 @@ def cmd_build(args):
     # before the build's modules are imported (a refusal takes the interpreter's start and the scene's reading)
     t_parse = time.perf_counter() - t0
     est = check_build(scene, max_spheres=positive_int(args.max_spheres, "--max-spheres"))
-    from .build import Timer, build_model, summary
+    from .builder import Timer, build_model, summary
 
     timer = Timer(say)
     timer.t["parse"] = t_parse

@@ -1,6 +1,6 @@
 """Resource estimates before work: how many spheres a build makes and how much memory it needs.
 
-``check_build(scene)`` runs first in ``sgim.build.build_model`` (so ``sgim build``, the in-memory builds of
+``check_build(scene)`` runs first in ``sgim.builder.build_model`` (so ``sgim build``, the in-memory builds of
 ``dda`` sphere scenes and ``adapters export``, and the ``cases study`` evaluators all go through it). It counts
 the spheres without allocating them and refuses with one SceneError line, naming the key to change and the
 numbers, when the count passes the scene's limit or the memory estimate passes the memory available now.

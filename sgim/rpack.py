@@ -814,7 +814,7 @@ def pack_statistics(X, R, region, volume, gap, seed=0, local_radius=None, les=Tr
 
 
 # ---------------------------------------------------------------------------
-# scene -> spheres (used by sgim/build.py)
+# scene -> spheres (used by sgim/builder.py)
 
 def pack_and_measure(region, spec, near=None, gap=1e-3, local_radius=None, progress=None, rounds=3):
     """Pack, measure (pack_statistics), and seed the holes the growth did not reach.

@@ -6,7 +6,7 @@ import copy
 import numpy as np
 
 import sgim_ref as ref
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.packing import make_lattice
 from sgim.scene import scene_from_dict
 

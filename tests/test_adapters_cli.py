@@ -18,7 +18,7 @@ import pytest
 
 from adapters.result import RunResult
 from engine_runs import require_engine
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]

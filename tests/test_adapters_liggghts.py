@@ -29,7 +29,7 @@ def deck(run, path, variant="bonds"):
 
 def column_model(joint=True):
     """FCC block 0.4 x 0.4 x 0.6 m (r = 0.05) with a horizontal through-going joint at z = 0.3 (or none)."""
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     data = {"name": "column", "domain": {"min": [0, 0, 0], "max": [0.4, 0.4, 0.6]},

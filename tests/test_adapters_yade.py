@@ -31,7 +31,7 @@ def deck(run, tmp_path, name="deck", **kw):
 
 
 def sgim_model(extent, discs, radius=0.05):
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     data = {"name": "yade_test", "domain": {"min": [0.0, 0.0, 0.0], "max": list(extent)},

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sgim import shapes
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.cavities import cavity_set
 from sgim.meshquery import TriMesh
 from sgim.packing import lattice_for

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.scene import load_scene, scene_from_dict
 
 # ---------------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """Colours, membership and bonds (paper eq. 13-16) against independent brute force.
 
-Scenes are built with sgim.scene.scene_from_dict and run through sgim.build.build_model;
+Scenes are built with sgim.scene.scene_from_dict and run through sgim.builder.build_model;
 the references in tests/sgim_ref.py recompute everything from the scene dictionaries.
 """
 from __future__ import annotations

@@ -169,7 +169,7 @@ def test_block_scene_pvd_lists_every_frame_and_frames_match_the_series(tmp_path)
 
 
 def _layer_model(tmp_path):
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     d = {"name": "layer", "domain": {"min": [0, 0, 0], "max": [1, 1, 0.4]},

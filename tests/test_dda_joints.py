@@ -184,7 +184,7 @@ def test_joint_input_errors():
 
 def test_scene_joint_pairs_become_smooth_joints(tmp_path):
     from dda.scene import load_scene
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     nrm = np.array([0.3, 0.1, 1.0]) / np.linalg.norm([0.3, 0.1, 1.0])

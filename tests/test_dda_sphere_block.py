@@ -181,7 +181,7 @@ def test_dda_run_of_a_scene_with_spheres_and_a_moving_block(tmp_path):
     # carry its weight; `dda run` writes the block series and meshes
     from dda.cli import main
     from dda.scene import load_scene
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     d = {"name": "layer", "domain": {"min": [0, 0, 0], "max": [1, 1, 0.2]},

@@ -178,7 +178,7 @@ def test_sphere_on_an_incline(phi, kind):
 
 
 def test_sgim_model_with_a_cut_joint_hangs_and_the_far_side_falls():
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     d = {"name": "cut", "domain": {"min": [0, 0, 0], "max": [2, 2, 3]},
@@ -201,7 +201,7 @@ def test_sgim_model_with_a_cut_joint_hangs_and_the_far_side_falls():
 
 
 def _cut_model(tmp_path):
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     d = {"name": "cut", "domain": {"min": [0, 0, 0], "max": [2, 2, 3]},

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from scipy import integrate, optimize, stats
 
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.cli import main as sgim_main
 from sgim.dfn import clipped_areas, network_for
 from sgim.scene import SceneError, scene_from_dict

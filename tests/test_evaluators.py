@@ -148,7 +148,7 @@ thickness = 0.25
 
 
 def test_sgim_build_detached_clusters_against_bfs(tmp_path):
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import load_scene
 
     p = tmp_path / "small_dfn.toml"
@@ -174,7 +174,7 @@ def test_sgim_build_detached_clusters_against_bfs(tmp_path):
 def test_detached_clusters_layer_cut_by_a_full_joint(tmp_path):
     # a cube of 10 x 10 x 10 cubic-packed spheres cut at mid-height by a joint across the whole domain: held by
     # the bottom face alone, the upper 500 spheres form one detached cluster; held by the sides as well, none
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import load_scene
 
     p = tmp_path / "layer.toml"

@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 from scipy.spatial import cKDTree
 
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.grading import Grading
 from sgim.scene import SceneError, load_scene
 

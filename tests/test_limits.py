@@ -179,7 +179,7 @@ points = [[-1.0, -1.0, 1.5], [5.0, -1.0, 1.0], [5.0, 5.0, 2.0], [-1.0, 5.0, 1.2]
     scene = load_scene(_write(tmp_path, _box("cubic", [0, 0, 0], [4, 4, 3], 0.25, extra)))
     est = estimate(scene)
     assert est.upper_bound and "before excavation" in est.line()
-    from sgim.build import build_model
+    from sgim.builder import build_model
 
     assert len(build_model(scene).radii) < est.spheres == scene.n_lattice_sites
 
@@ -272,7 +272,7 @@ def test_memory_past_what_is_available_is_refused_under_the_limit(tmp_path):
 def test_every_path_that_builds_a_model_goes_through_the_check(tmp_path, capsys):
     """build_model itself (studies, adapters), the in-memory build of a dda [spheres] scene, and adapters
     export of an sgim scene refuse the 10 km cube at once."""
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import SceneError, load_scene
 
     huge = _write(tmp_path, _box("cubic", [0, 0, 0], [10000, 10000, 10000], 0.5), "huge.toml")

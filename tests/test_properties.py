@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.scene import SceneError, scene_from_dict
 from sgim_check import check_model
 

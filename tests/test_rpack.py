@@ -307,7 +307,7 @@ def test_touching_pairs_branch_for_wide_radius_range():
 
 def test_build_bonds_for_unequal_radii(tmp_path):
     """sgim build on a random packing: the bond list is every pair with |ci - cj| <= (ri + rj)(1 + tol)."""
-    from sgim.build import build_model
+    from sgim.builder import build_model
 
     (tmp_path / "s.toml").write_text("""
 [domain]
@@ -374,7 +374,7 @@ def test_sieve_curve_recovered():
 def test_core_sample_case():
     """cases/core_sample.toml: a sieve-curve packing fills the closed cylinder of
     cases/meshes/core_sample.obj to its surface, and the joint colours the spheres within 2 r."""
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import dip_to_normal
 
     scene = load_scene(ROOT / "cases" / "core_sample.toml")
@@ -478,7 +478,7 @@ segments = 32
 [output]
 formats = ["npz"]
 """)
-    from sgim.build import build_model
+    from sgim.builder import build_model
 
     scene = load_scene(tmp_path / "s.toml")
     model = build_model(scene)

@@ -171,7 +171,7 @@ def test_in_house_sphere_set_gets_the_loads():
 
 
 def sgim_model():
-    from sgim.build import build_model
+    from sgim.builder import build_model
     from sgim.scene import scene_from_dict
 
     d = {"name": "loads", "domain": {"min": [0, 0, 0], "max": [0.3, 0.3, 0.6]}, "packing": {"kind": "fcc",

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sgim import shapes
-from sgim.build import build_model
+from sgim.builder import build_model
 from sgim.meshquery import TriMesh
 from sgim.model import SphereModel
 from sgim.scene import SceneError, scene_from_dict
