@@ -444,7 +444,7 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true", help="print the rows as JSON on stdout (instead of the table)")
     ap.add_argument("--keep", help="keep the decks and results in this folder")
     ap.add_argument("--timeout", type=float, default=1800.0, help="time limit per engine run [s]")
-    ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines")
     args = ap.parse_args(argv)
     cases = [c for c in args.cases.split(",") if c]
     engines = [e for e in args.engines.split(",") if e]

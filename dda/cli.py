@@ -43,7 +43,7 @@ def make_parser():
     p = add_version(argparse.ArgumentParser(prog="dda", description="Explicit 3D DDA for convex blocks"))
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run a DDA scene")
-    r.add_argument("scene")
+    r.add_argument("scene", help="the DDA scene file (TOML: blocks, generators and / or [spheres]; dda/scene.py)")
     r.add_argument("-o", "--output", required=True, help="output folder")
     r.add_argument("--quiet", action="store_true", help="no progress lines")
     r.add_argument("--json", action="store_true", help="print summary.json (with the answers) to stdout")
