@@ -704,6 +704,10 @@ def resolve_evaluator(name, study_dir=None):
             raise LookupError("must be 'module:function'")
         if study_dir is not None and str(study_dir) not in sys.path:
             sys.path.insert(0, str(study_dir))
+        here = _study_module_file(mod_name, study_dir)
+        old = sys.modules.get(mod_name)
+        if here is not None and old is not None and getattr(old, "__file__", None) != str(here):
+            del sys.modules[mod_name]  # a module of that name from another study's folder: this study's own
         try:
             mod = importlib.import_module(mod_name)
         except ImportError as exc:
@@ -724,6 +728,19 @@ def resolve_evaluator(name, study_dir=None):
     if name not in reg:
         raise LookupError(f"unknown evaluator (known: {', '.join(sorted(reg))}; or 'module:function')")
     return reg[name]
+
+
+def _study_module_file(mod_name, study_dir):
+    """The file of top-level module `mod_name` in the study's folder (None when it is not there)."""
+    if study_dir is None or "." in mod_name:
+        return None
+    from importlib.machinery import PathFinder
+
+    try:
+        spec = PathFinder.find_spec(mod_name, [str(study_dir)])
+    except (ImportError, ValueError):
+        return None
+    return Path(spec.origin) if spec is not None and spec.origin and spec.has_location else None
 
 
 def module_file(ev):

@@ -869,6 +869,6 @@ def test_bench_study_overhead_reports_machine_and_figures():
     assert lines[0] == machine_line()
     res = json.loads(r.stdout[r.stdout.index("{"):])
     assert set(res["overhead"]) == {"1 fork", "2 fork", "1 reuse", "2 reuse"}
-    for v in res["overhead"].values():
-        assert math.isfinite(v["per_case_ms"]) and v["cpu_per_case_ms"] > 0
+    for v in res["overhead"].values():  # differences of two runs: finite, their size depends on the load
+        assert all(math.isfinite(v[k]) for k in ("per_case_ms", "runner_per_case_ms", "cpu_per_case_ms", "load1"))
     assert res["fork"]["cpu_ms"] > 0
