@@ -463,11 +463,16 @@ def _tick_labels(values, fmt):
 
 
 def _tidy_log(ax):
-    """No labels on the minor ticks of log axes (they overlap); the major ones stay."""
-    from matplotlib.ticker import NullFormatter
+    """Log axes labelled in plain numbers at 1, 2, 5 x 10^k (1 x 10^k only past four decades); no labels on the
+    minor ticks (they overlap)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    for axis, scale in ((ax.xaxis, ax.get_xscale()), (ax.yaxis, ax.get_yscale())):
+    for axis, scale, lim in ((ax.xaxis, ax.get_xscale(), ax.get_xlim()), (ax.yaxis, ax.get_yscale(), ax.get_ylim())):
         if scale == "log":
+            lo, hi = sorted(lim)
+            wide = lo > 0 and hi / lo > 1e4
+            axis.set_major_locator(LogLocator(base=10.0, subs=(1.0,) if wide else (1.0, 2.0, 5.0)))
+            axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
             axis.set_minor_formatter(NullFormatter())
 
 
@@ -505,8 +510,8 @@ def plot_response(path, col, params, data, rows, names):
             ax.set_xscale("log")
         if logscale:
             ax.set_yscale("log")
-        _value_ticks(ax, x)
         _tidy_log(ax)
+        _value_ticks(ax, x)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3, which="both")
         ax.set_title(names.title(f"{what} against {names.name(params[0])}"), fontsize=10)

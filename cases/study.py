@@ -51,6 +51,7 @@ import copy
 import itertools
 import json
 import math
+import os
 import re
 import sys
 import tomllib
@@ -692,8 +693,9 @@ class _Parser(argparse.ArgumentParser):
     """Bad options in one line (``cases study: error: ...``) and exit status 2."""
 
     def error(self, message):
-        print(f"cases study: error: {self.prog.removeprefix('cases study').strip() or 'study'}: {message} "
-              f"(see {self.prog} --help)", file=sys.stderr)
+        if os.environ.get("OMPI_COMM_WORLD_RANK", os.environ.get("PMI_RANK", "0")) == "0":  # one line under mpirun
+            print(f"cases study: error: {self.prog.removeprefix('cases study').strip() or 'study'}: {message} "
+                  f"(see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT)
 
 

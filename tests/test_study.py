@@ -337,6 +337,11 @@ def test_bad_input_under_mpirun_one_line(tmp_path):
     lines = [ln for ln in r.stderr.splitlines() if "cases study: error:" in ln]
     assert len(lines) == 1 and "unknown parameter path" in lines[0]
     assert not out.exists()
+    for opts, words in ((["--timeout", "inf"], "--timeout"), (["--bogus"], "--bogus")):  # once, not once per rank
+        r = run_mpi(2, "run", path, "-o", out, *opts)
+        lines = [ln for ln in r.stderr.splitlines() if "cases study: error:" in ln]
+        assert r.returncode != 0 and len(lines) == 1 and words in lines[0], r.stderr
+        assert not out.exists()
 
 
 # --------------------------------------------------------------------------------------------- faults
