@@ -9,6 +9,9 @@
 - rocking: a 0.12 x 0.12 x 0.2 m block of FCC spheres (r = 0.015, central bonds) cut by a horizontal
   zero-thickness joint at z = 0.07, its base fixed, pushed sideways at its top: the heel of the smooth joint
   opens in the first swing and closes again as local damping brings the block to rest.
+- beam_joint, beam_settle: a 1.2 x 0.12 x 0.12 m FCC cantilever (r = 0.015, central bonds) fixed at x < 0.04:
+  cut by a vertical joint through the lattice's centres at x = 0.6 (the part beyond it detaches), and intact,
+  damped by [simulation] viscous_damping = "critical" alone (LIGGGHTS' fix viscous): its static sag.
 - wedge: the paper's wedge (joints 45/005 and 55/135, face 65/065, height 10 m) as FCC spheres (r = 0.5): the
   wedge's spheres bonded, the rock behind the joints fixed, the joints smooth: the friction at which it starts to
   slide against Hoek & Bray and the DDA block wedge.
@@ -32,6 +35,8 @@ HANG_VARIANTS = {
 }
 ROCKING_JOINT = [dict(name="joint", centre=[0.06, 0.06, 0.07], dip=0.0, dip_direction=0.0, radius=1.0,
                       thickness=0.0)]
+BEAM_JOINT = [dict(name="joint", centre=[0.6, 0.06, 0.06], dip=90.0, dip_direction=90.0, radius=1.0,
+                   thickness=0.0)]
 WEDGE = dict(joint_a=(45.0, 5.0), joint_b=(55.0, 135.0), face=(65.0, 65.0), height=10.0, radius=0.5, margin=1.6,
              rock=1.5)
 
@@ -122,6 +127,23 @@ def write_all(folder=HERE):
         {"density": 2600.0, "fixed": ["z<0.03"], "bond_young": 1e8, "bond_shear_ratio": 0.0, "smooth_joints": True,
          "joint_friction": 40.0}) + "\n" + _table("spheres.load", {"region": "z>0.155", "force": [0.25, 0.0, 0.0]},
                                                   True)
+    beam_sim = {"kn": 1e6, "ks": 5e5, "friction": 30.0}
+    beam_spheres = {"density": 2600.0, "fixed": ["x<0.04"], "bond_shear_ratio": 0.0}
+    files["beam_model.toml"] = sgim_scene("beam_model", "A 1.2 x 0.12 x 0.12 m beam of bonded FCC spheres, r = 0.015.",
+                                          (0.0, 0.0, 0.0), (1.2, 0.12, 0.12), 0.015)
+    files["beam_joint_model.toml"] = sgim_scene(
+        "beam_joint_model", "The beam cut by a vertical joint at x = 0.6, through lattice centres (they are green: "
+        "on the joint).", (0.0, 0.0, 0.0), (1.2, 0.12, 0.12), 0.015, BEAM_JOINT)
+    files["beam_joint.toml"] = dda_scene(
+        "beam_joint", "The jointed beam, fixed at x < 0.04, under gravity for 0.06 s: the 293 spheres beyond the "
+        "joint fall (no bond ties them to the fixed end), the rest hold.", "beam_joint_model.toml",
+        {"duration": 0.06, "record_every": 0.002, "frames": 1}, beam_sim, beam_spheres)
+    files["beam_settle.toml"] = dda_scene(
+        "beam_settle", "The intact beam damped by viscous damping at the critical ratio of its first mode "
+        "(LIGGGHTS' fix viscous; the in-house engine and YADE have no such damping and list it): after 0.3 s "
+        "(16 / omega_1) its sag is the static one.", "beam_model.toml",
+        {"duration": 0.3, "record_every": 0.01, "viscous_damping": "critical", "frames": 1}, beam_sim,
+        beam_spheres)
     lo, hi, cavities = wedge_cavities()
     w = WEDGE
     discs = [dict(name=f"joint {n}", centre=[0.0, 0.0, 0.0], dip=d[0], dip_direction=d[1], radius=60.0,

@@ -113,3 +113,14 @@ def test_json_goes_to_stdout_like_every_other_tool(tmp_path):
     assert {row["case"] for row in rows} == {f"hang_{v}" for v in cv.HANG}
     assert all(row["engine"] == "dda" and row["ok"] and row["value"] == row["ref_value"] for row in rows)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_beam_damped_from_its_scene_alone_settles_in_liggghts(tmp_path):
+    # [simulation] viscous_damping = "critical" is all the scene says: LIGGGHTS' fix viscous at the first mode's
+    # critical damping brings the intact cantilever to its static sag (the spring network's linear solution)
+    if not (shutil.which("liggghts") or CI):
+        pytest.skip("LIGGGHTS is not installed")
+    require_engine("liggghts")
+    row = cv.beam_settle(tmp_path)
+    assert row.ok, cv.table([row])
+    assert abs(row.err_value) <= 1e-3
