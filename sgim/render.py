@@ -364,6 +364,7 @@ class Frame:
         if getattr(self, "_bar", None):
             self._draw_colour_bar()
         self._scale_bar()
+        self.pl.renderer.ResetCameraClippingRange()  # of everything added since fit()
         with atomic_path(path) as tmp:
             self.pl.screenshot(tmp + ".png")
             os.replace(tmp + ".png", tmp)
