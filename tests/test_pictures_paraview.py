@@ -77,10 +77,11 @@ def test_cut_away_removes_the_spheres_meeting_every_condition():
     assert np.array_equal(idx, np.flatnonzero(~gone))
 
 
-@pytest.mark.parametrize("size", [(400, 300), (1600, 1100)])
+@pytest.mark.parametrize("size", [(400, 300, 0.0), (1600, 1100, 0.0), (400, 300, 2e4)])
 def test_column_shown_whole_with_legend_and_scale_bar_clear_of_the_model(tmp_path, size):
-    w, h = size
+    w, h, far = size  # far: the column moved 20 km from the origin (the camera's clipping range follows)
     m = _column()
+    m.centers += far
     info = render(m, tmp_path / "c.png", width=w, height=h, title="a tall column of spheres")
     img = _pixels(tmp_path / "c.png")
     assert img.shape == (h, w, 3)
