@@ -10,7 +10,7 @@ environments that switch what differs between x86-64 CPUs:
   selects: no FMA, other blocking, i.e. the BLAS / LAPACK round-off of another machine), NPY_DISABLE_CPU_FEATURES
   (numpy's SIMD dispatch, AVX2 / AVX-512, switched off: its element-wise and transcendental loops run the
   baseline code) and NUMBA_NUM_THREADS=1 (the parallel kernels on one thread), all at once;
-- a fresh NUMBA_CACHE_DIR (the DDA job): the kernels compiled anew (results must not depend on a warm cache).
+- a fresh NUMBA_CACHE_DIR (the FCP job): its kernels compiled anew (results must not depend on a warm cache).
 
 Every output array must hash the same as in the plain environment, and a second plain sgim build repeats the
 first byte for byte. Jobs run two at a time (the cold compile overlaps the others).
@@ -48,9 +48,10 @@ def _environments(tmp):
         "plain": (base, JOBS),
         "plain again": (base, ("sgim",)),  # the same scene and seed: byte-identical model.npz
         "another CPU (" + ", ".join(f"{k}={other[k]}" for k in sorted(set(other) - set(base))) + ")": (other, JOBS),
-        # (a cold compile of the whole engine costs about a minute: the DDA job, which uses the most kernels,
-        # stands for the others)
-        "cold numba cache": ({**base, "NUMBA_CACHE_DIR": str(tmp / "numba-cold")}, ("dda",)),
+        # (a cold compile of the whole block and sphere engine costs one to two minutes of the suite: the FCP
+        # job's kernels, which decide contact features, stand for the others; numba writes and reads every
+        # kernel's cache the same way)
+        "cold numba cache": ({**base, "NUMBA_CACHE_DIR": str(tmp / "numba-cold")}, ("fcp",)),
     }
 
 
