@@ -26,7 +26,8 @@ def _moves(pos, vel, moving):
 
 
 def plot_series(path, title, time, energy, bodies):
-    """Write the PNG. `bodies`: list of (name, pos (r, n, 3), vel (r, n, 3) or None, moving (n,) bool)."""
+    """Write the PNG. `bodies`: list of (name, pos (r, n, 3), vel (r, n, 3) or None (then the time derivative of
+    the positions), moving (n,) bool)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -37,7 +38,9 @@ def plot_series(path, title, time, energy, bodies):
     fig.suptitle(f"{title}: time series")
     for name, pos, vel, moving in bodies:
         pos = np.asarray(pos, float)
-        vel = np.zeros_like(pos) if vel is None else np.asarray(vel, float)
+        if vel is None:  # not recorded (moving blocks of a sphere run): the rate of the recorded positions
+            vel = np.gradient(pos, t, axis=0) if pos.ndim == 3 and len(pos) == len(t) > 1 else np.zeros_like(pos)
+        vel = np.asarray(vel, float)
         dm, dx, sm, sx = _moves(pos, vel, np.asarray(moving, bool))
         if len(dm) != len(t):
             continue
