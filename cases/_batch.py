@@ -839,7 +839,12 @@ def _master(comm, run, todo, local):
     walls = deque(maxlen=16)
 
     def depth():
-        return 2 if len(walls) >= 2 and sorted(walls)[len(walls) // 2] < PREFETCH_BELOW_S else 1
+        """Cases a rank holds: 1 for long cases; for short ones enough to cover rank 0's answer time (POLL_S)
+        five times over, 2 to 8."""
+        if len(walls) < 2:
+            return 1
+        med = sorted(walls)[len(walls) // 2]
+        return 1 if med >= PREFETCH_BELOW_S else int(min(8, max(2, math.ceil(5 * POLL_S / max(med, 1e-6)))))
 
     def take(rank):
         for k, (i, attempt, avoid) in enumerate(queue):
