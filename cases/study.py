@@ -112,7 +112,8 @@ class Study:
     cases: list = field(default_factory=list)
     needs: tuple = ()
     units: dict = field(default_factory=dict)  # result or parameter -> unit (the evaluator's, then the study's)
-    files: list = field(default_factory=list)  # the files the base scene names (absolute paths)
+    files: list = field(default_factory=list)  # the files the base scene and the parameters name (absolute)
+    value_files: dict = field(default_factory=dict)  # a parameter's text value -> the file it names
     description: str = ""
 
     def to_json(self):
@@ -135,11 +136,14 @@ class Study:
                 return "unreadable"
 
         out = {"study file": digest(self.path), "base scene": digest(self.base)}
-        for f in self.files:
-            try:
-                rel = Path(f).relative_to(self.base.parent).as_posix()
-            except ValueError:
-                rel = str(f)
+        for f in self.files:  # named relative to the study file's folder, else the base scene's, else absolute
+            rel = str(f)
+            for folder in (self.path.parent, self.base.parent):
+                try:
+                    rel = Path(f).relative_to(folder).as_posix()
+                    break
+                except ValueError:
+                    pass
             out[f"file {rel}"] = digest(f)
         try:
             mod = module_file(resolve_evaluator(self.engine, self.path.parent.resolve()))
@@ -150,9 +154,12 @@ class Study:
         return out
 
     def case_scene(self, case):
-        """The base scene with the case's values substituted (a dict)."""
+        """The base scene with the case's values substituted (a dict); a text value naming a file (relative to the
+        study file's folder, else to the base scene's) becomes its absolute path."""
         scene = copy.deepcopy(self.base_scene)
         for path, value in case.params.items():
+            if isinstance(value, str) and value in self.value_files:
+                value = str(self.value_files[value])
             _set_path(scene, path, value)
         return scene
 
@@ -379,6 +386,19 @@ def load_study(path, check_engine=True) -> Study:
                   seed=seed, timeout=float(timeout) if timeout is not None else None, method=method,
                   samples=samples, params=params, needs=tuple(needs), units=all_units, files=files,
                   description=description)
+    for p in params:  # text values of grid / list parameters that name files
+        for v in (p.spec if p.kind == "grid" else []):
+            if isinstance(v, str) and v and len(v) < 4096 and v not in study.value_files:
+                for folder in (path.resolve().parent, base.parent):
+                    cand = Path(v) if Path(v).is_absolute() else folder / v
+                    try:
+                        if cand.is_file():
+                            study.value_files[v] = cand.resolve()
+                            if cand.resolve() not in files:
+                                files.append(cand.resolve())
+                            break
+                    except (OSError, ValueError):
+                        pass
     study.cases = make_cases(study)
     return study
 

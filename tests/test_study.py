@@ -877,3 +877,26 @@ def test_bench_study_overhead_reports_machine_and_figures():
     for v in res["overhead"].values():  # differences of two runs: finite, their size depends on the load
         assert all(math.isfinite(v[k]) for k in ("per_case_ms", "runner_per_case_ms", "cpu_per_case_ms", "load1"))
     assert res["fork"]["cpu_ms"] > 0
+
+
+def test_file_values_of_parameters_resolved_against_the_study_file(tmp_path):
+    """A list of mesh files to vary, written relative to the study file: each case's scene names the file by its
+    absolute path (the case runs in its own folder), and the files are part of the fingerprint."""
+    base = BASE.replace('mode = "ok"', 'mode = "ok"\nmesh = "none"')
+    path = write_study(tmp_path / "s", """
+        base = "scenes/base.toml"
+        evaluator = "noop"
+        results = ["value"]
+        [parameters]
+        "contact.mesh" = { list = ["meshes/a.obj", "meshes/b.obj", "not-a-file"] }
+    """, base=base)
+    (tmp_path / "s" / "scenes").mkdir()
+    (tmp_path / "s" / "base.toml").rename(tmp_path / "s" / "scenes" / "base.toml")
+    (tmp_path / "s" / "meshes").mkdir()
+    for n in "ab":
+        (tmp_path / "s" / "meshes" / f"{n}.obj").write_text("v 0 0 0\n")
+    study = load_study(path)
+    names = [tomllib.loads(study.case_scene_text(c))["contact"]["mesh"] for c in study.cases]
+    assert names == [str((tmp_path / "s" / "meshes" / "a.obj").resolve()),
+                     str((tmp_path / "s" / "meshes" / "b.obj").resolve()), "not-a-file"]
+    assert {"file meshes/a.obj", "file meshes/b.obj"} <= set(study.fingerprint())
