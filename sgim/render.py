@@ -109,9 +109,9 @@ def _nice_length(x):
 
 
 def length_label(L):
-    """'20 mm', '5 m', '2 km' for a length L [m]."""
-    for unit, f in (("km", 1e3), ("m", 1.0), ("mm", 1e-3), ("\u00b5m", 1e-6)):
-        if L >= f * 0.999 or unit == "\u00b5m":
+    """'20 mm', '0.5 m', '5 m', '2 km' for a length L [m] (metres from 0.1 m up to 1 km)."""
+    for unit, f, least in (("km", 1e3, 1e3), ("m", 1.0, 0.1), ("mm", 1e-3, 1e-3), ("\u00b5m", 1e-6, 0.0)):
+        if L >= least * 0.999:
             v = L / f
             return f"{v:.0f} {unit}" if abs(v - round(v)) < 1e-9 else f"{v:g} {unit}"
     return f"{L:g} m"
