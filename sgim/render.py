@@ -239,7 +239,12 @@ class Frame:
                 ticks_pts += [p, p + tick3]
                 lines.append(len(ticks_pts) - 2)
                 text(f"{v:.6g}", p, n2 * 2.2 * self.fs)
-            text("xyz"[axis] + " [m]", mid, n2 * 4.2 * self.fs)
+            if axis == 2:  # above the vertical axis: clear of its tick labels whatever the range
+                end = start.copy()
+                end[2] = b
+                text("z [m]", end, np.array([-1.2 * self.fs, 1.6 * self.fs]))
+            else:
+                text("xyz"[axis] + " [m]", mid, n2 * 4.2 * self.fs)
         if ticks_pts:
             pts = np.array(ticks_pts)
             cells = np.column_stack([np.full(len(lines), 2), lines, np.array(lines) + 1]).ravel()
