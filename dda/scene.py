@@ -332,7 +332,7 @@ def _read_spheres(rd, data, path):
     mp = Path(name) if Path(name).is_absolute() else Path(path).parent / name
     if not mp.is_file():
         rd.err("spheres.model", name, f"no such file ({mp})")
-    fixed = st.get("fixed", [])
+    fixed = rd.value(st, "fixed", "spheres.fixed", [], "list of strings")
     if not isinstance(fixed, list):
         rd.err("spheres.fixed", fixed, 'must be a list like ["z>2.6"]')
     regions = []
@@ -485,9 +485,11 @@ def _list_of_tables(rd, data, name):
     return v
 
 
-def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
+def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
+    """The validated DDAScene of a parsed scene file; `reader(path)` makes the value reader (default
+    sgim.scene._Reader; dda/scenedoc.py passes one that records what is read)."""
     path = Path(path)
-    rd = _Reader(path)
+    rd = (reader or _Reader)(path)
     rd.known(data, TOP_KEYS, "")
     name = rd.string(data, "name", "name", path.stem)
 
@@ -613,7 +615,7 @@ def scene_from_dict(data, path="<scene>", text="") -> DDAScene:
     reports = read_reports(rd, data, [b.name for b in blocks], bool(spheres))
     ot = rd.table(data, "output", "output")
     rd.known(ot, {"formats"}, "output")
-    formats = ot.get("formats", list(OUTPUT_FORMATS))
+    formats = rd.value(ot, "formats", "output.formats", list(OUTPUT_FORMATS), "list of strings")
     if not isinstance(formats, list) or any(f not in OUTPUT_FORMATS for f in formats):
         rd.err("output.formats", formats, f"must be a list drawn from {', '.join(OUTPUT_FORMATS)}")
     rt = rd.table(data, "render", "render")

@@ -324,7 +324,7 @@ class DfnSpec:
 
 
 def _int(rd, tab, name, key, default, lo):
-    v = tab.get(name, default)
+    v = rd.value(tab, name, key, default, "integer")
     if isinstance(v, bool) or not isinstance(v, int):
         rd.err(key, v, "must be an integer")
     if v < lo:

@@ -218,6 +218,10 @@ class _Reader:
             self.err(key, v, "must be a string")
         return v
 
+    def value(self, tab, name, key, default, kind="value"):
+        """`tab[name]` or `default`, checked by the caller (`kind` names what it must be, for docs/scenes.md)."""
+        return tab.get(name, default)
+
 
 TOP_KEYS = {"name", "description", "domain", "packing", "excavation", "discontinuity", "bonds", "output", "render"}
 TOP_KEYS |= {"dfn", "joint_set"}  # Monte-Carlo fracture network (sgim/dfn.py)
@@ -252,9 +256,11 @@ def load_scene(path) -> Scene:
     return scene_from_dict(data, path, text)
 
 
-def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
+def scene_from_dict(data: dict, path="<scene>", text="", reader=None) -> Scene:
+    """The validated Scene of a parsed scene file; `reader(path)` makes the value reader (default _Reader;
+    sgim/scenedoc.py passes one that records what is read)."""
     path = Path(path)
-    rd = _Reader(path)
+    rd = (reader or _Reader)(path)
     rd.known(data, TOP_KEYS, "")
     name = rd.string(data, "name", "name", path.stem)
 
@@ -308,7 +314,7 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
 
     ot = rd.table(data, "output", "output")
     rd.known(ot, {"formats"}, "output")
-    formats = ot.get("formats", list(OUTPUT_FORMATS))
+    formats = rd.value(ot, "formats", "output.formats", list(OUTPUT_FORMATS), "list of strings")
     if not isinstance(formats, list) or any(f not in OUTPUT_FORMATS for f in formats):
         rd.err("output.formats", formats, f"must be a list drawn from {', '.join(OUTPUT_FORMATS)}")
     if "npz" not in formats:
@@ -316,7 +322,7 @@ def scene_from_dict(data: dict, path="<scene>", text="") -> Scene:
 
     rt = rd.table(data, "render", "render")
     rd.known(rt, {"hide_intact", "translucent", "cut_away", "width", "height"}, "render")
-    cut = rt.get("cut_away", [])
+    cut = rd.value(rt, "cut_away", "render.cut_away", [], "string or list of strings")
     if isinstance(cut, str):
         cut = [cut]
     if not isinstance(cut, list):
