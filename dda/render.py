@@ -89,10 +89,8 @@ SPHERE_COLOURS = np.array([[0.80, 0.74, 0.60], [0.85, 0.20, 0.20], [0.25, 0.65, 
 
 def render_png(sim, path, width=1600, height=1100, title=None):
     """Off-screen PNG of the blocks of a block Simulation (moving blocks coloured by their displacement)."""
-    t = getattr(sim, "time", None)
-    if title and t is not None:
-        title = f"{title}   t = {float(t):.4g} s"
-    render_meshes(path, blocks=block_polydata(sim), width=width, height=height, title=title)
+    return render_meshes(path, blocks=block_polydata(sim), width=width, height=height, title=title,
+                         time=getattr(sim, "time", None))
 
 
 def _magnitude(a):
@@ -100,16 +98,19 @@ def _magnitude(a):
     return np.linalg.norm(a, axis=1) if a.ndim == 2 else np.abs(a)
 
 
-def render_meshes(path, blocks=None, spheres=None, width=1600, height=1100, title=None, cmap="viridis"):
+def render_meshes(path, blocks=None, spheres=None, width=1600, height=1100, title=None, cmap="viridis", time=None):
     """Off-screen PNG of the state: `blocks` (faces_polydata) drawn as polyhedra, `spheres` (sphere_polydata)
     drawn as spheres of their radius. What moves is coloured by its displacement from the start (cell data
     ``displacement`` of the blocks, point data of the spheres) on one scale with a colour bar in metres; fixed
     blocks and spheres are grey. Legend, axes in metres, scale bar and a camera fitted to everything drawn as
-    for sgim pictures (sgim.render.Frame). Returns the picture's facts (legend, colour range, scale bar)."""
+    for sgim pictures (sgim.render.Frame); `time` [s], when given, follows the title. Returns the picture's facts
+    (legend, colour range, scale bar)."""
     import pyvista as pv
 
     from sgim.render import Frame
 
+    if time is not None:
+        title = f"{title + '   ' if title else ''}t = {float(time):.4g} s"
     frame = Frame(width, height, title)
     pl = frame.pl
     parts, bounds = [], []
