@@ -3,13 +3,13 @@
 ``run_inhouse(run, out=None, progress=None)`` builds the SphereSet and SphereSimulation of the run
 (``run.in_house()``: bonds in run.bond_i/j order with their kn, ks, ft, fs and rest lengths, the cut pairs on
 joints as smooth joints with run.joint_normal and run.joint_friction_deg when run.smooth_joints, the contact
-law, gravity, run.dt, Cundall local damping, viscous bond damping run.bond_zeta, the constant sphere forces
-run.force and the prescribed velocities run.velocity of run.prescribed), steps it run.steps times and records every run.record_steps
+law, gravity, run.dt, Cundall local damping, the viscous damping of the spheres run.viscous_damping, viscous
+bond damping run.bond_zeta, the constant sphere forces run.force and the prescribed velocities run.velocity of
+run.prescribed), steps it run.steps times and records every run.record_steps
 steps (first record at t = 0): series ``kinetic`` (translational + rotational energy of the free spheres [J])
 and ``bonds_intact``, positions when n * records <= 5e6, and the final positions, velocities and bond states.
-The in-house engine does every feature of the run exactly (it is the reference the decks are compared with)
-except a viscous damping of the spheres' velocities (run.viscous_damping, LIGGGHTS' fix viscous), which
-``extra["approximations"]`` then names; ``extra`` also holds the set-up time, the stepping CPU time (``cpu_s``)
+The in-house engine does every feature of the run exactly (it is the reference the decks are compared with),
+so ``extra["approximations"]`` is empty; ``extra`` also holds the set-up time, the stepping CPU time (``cpu_s``)
 and the pair-list rebuilds.
 
 The engine's cost depends on how its arrays are laid out in memory: the run is stepped with its spheres
@@ -74,11 +74,7 @@ def reordered(run, perm):
 
 def approximations(run):
     """What the in-house engine does not represent of `run`: strings naming the scene key (RunResult.extra)."""
-    out = []
-    if run.viscous_damping > 0:
-        out.append(f"simulation.viscous_damping (c = {run.viscous_damping:g} N s/m on every sphere, LIGGGHTS' fix "
-                   "viscous) not represented: the in-house engine damps with simulation.local_damping")
-    return out
+    return []  # every key of a run: bonds, joints, loads, contact, local, viscous and bond damping
 
 
 def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:

@@ -17,8 +17,8 @@ in-house (dda.spheres), in YADE or in LIGGGHTS:
   critical, viscous), and the run: ``gravity``, ``dt`` (one step for every engine), ``duration``,
   ``record_every``, ``local_damping`` (Cundall's non-viscous damping, as YADE's NewtonIntegrator.damping),
   ``viscous_damping`` (a force -c v on every free sphere, c [N s/m] the same for all: LIGGGHTS' ``fix
-  viscous``; [simulation] viscous_damping gives it as a ratio of critical damping of the model's first mode,
-  :func:`viscous_coefficient`);
+  viscous``, the in-house SphereSimulation's viscous_damping; [simulation] viscous_damping gives it as a ratio
+  of critical damping of the model's first mode, :func:`viscous_coefficient`);
 - loads: ``force`` (n, 3) a constant force on each sphere [N] (added to its weight; no effect on fixed or
   prescribed spheres), ``prescribed`` (n,) bool and ``velocity`` (n, 3) [m/s]: prescribed spheres move at
   their velocity whatever the forces and do not turn (a platen; ``velocity`` is ignored elsewhere). A sphere
@@ -158,7 +158,8 @@ class SphereRun:
 
         ss = _sphere_set(self)
         law = ContactLaw(kn=self.kn, ks=self.ks, friction_deg=self.friction_deg, damping=self.damping)
-        sim = SphereSimulation(ss, law, gravity=self.gravity, dt=self.dt, local_damping=self.local_damping)
+        sim = SphereSimulation(ss, law, gravity=self.gravity, dt=self.dt, local_damping=self.local_damping,
+                               viscous_damping=self.viscous_damping)
         return ss, sim
 
 
@@ -315,86 +316,47 @@ def damping_ratio(value, what="viscous damping"):
     return float(value)
 
 
-def held_spheres(run):
-    """(n,) bool: the free spheres that a path of bonds ties to a fixed sphere (the part of the model that has a
-    static equilibrium under its bonds)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+def _anchored(run):
+    return np.asarray(run.fixed, bool) | np.asarray(run.prescribed, bool)
 
-    n = run.n
-    g = coo_matrix((np.ones(run.n_bonds), (run.bond_i, run.bond_j)), shape=(n, n))
-    _, lab = connected_components(g, directed=False)
-    fixed = np.asarray(run.fixed, bool) | np.asarray(run.prescribed, bool)
-    anchored = np.zeros(lab.max() + 1 if n else 0, bool)
-    anchored[lab[fixed]] = True
-    return anchored[lab] & ~fixed
+
+def _mass(run):
+    return run.density * 4.0 / 3.0 * np.pi * np.asarray(run.radii, float) ** 3
+
+
+def held_spheres(run):
+    """(n,) bool: the free spheres that a path of bonds ties to a fixed sphere (dda.spheres.held_by_bonds)."""
+    from dda.spheres import held_by_bonds
+
+    return held_by_bonds(run.n, run.bond_i, run.bond_j, _anchored(run))
 
 
 def static_displacement(run, gravity=None):
-    """Static displacement (n, 3) of the run's bond network under its weight (`gravity`, default run.gravity):
-    the sparse linear solve of K u = m g over the spheres held by bonds (held_spheres; the others stay 0). Each
-    bond is a normal spring kn along its centre line plus a shear spring ks across it (central bonds: ks = 0;
-    rotations left out). Raises ValueError when the network is a mechanism (no finite solution)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.linalg import spsolve
+    """Static displacement (n, 3) of the run's bond network under its weight (`gravity`, default run.gravity;
+    dda.spheres.bond_network_static: normal and shear bond springs, the spheres held by bonds)."""
+    from dda.spheres import bond_network_static
 
-    n = run.n
-    i, j = np.asarray(run.bond_i, np.int64), np.asarray(run.bond_j, np.int64)
-    d = run.centers[j] - run.centers[i]
-    e = d / np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
-    ee = e[:, :, None] * e[:, None, :]
-    kn, ks = np.asarray(run.bond_kn, float), np.asarray(run.bond_ks, float)
-    blocks = kn[:, None, None] * ee + ks[:, None, None] * (np.eye(3)[None] - ee)  # (m, 3, 3)
-    rows, cols, vals = [], [], []
-    for a, b, s in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
-        for p in range(3):
-            for q in range(3):
-                rows.append(3 * a + p)
-                cols.append(3 * b + q)
-                vals.append(s * blocks[:, p, q])
-    K = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
-    K = K.tocsr()
-    mass = run.density * 4.0 / 3.0 * np.pi * run.radii ** 3
-    g = np.asarray(run.gravity if gravity is None else gravity, float)
-    f = (mass[:, None] * g[None, :]).ravel()
-    free = np.repeat(held_spheres(run), 3)
-    u = np.zeros(3 * n)
-    if free.any():
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            u[free] = spsolve(K[free][:, free].tocsc(), f[free])
-        if not np.all(np.isfinite(u)):
-            raise ValueError("the bond network is a mechanism (no static solution)")
-    return u.reshape(n, 3)
+    g = run.gravity if gravity is None else gravity
+    return bond_network_static(run.centers, _mass(run), _anchored(run), run.bond_i, run.bond_j, run.bond_kn,
+                               run.bond_ks, g)
 
 
 def first_mode(run):
-    """(omega [rad/s], mean mass [kg]) of the run's first mode: the Rayleigh quotient of the static deflection
-    under gravity (static_displacement; downward if the run has no gravity) over the spheres held by bonds."""
-    g = np.asarray(run.gravity, float)
-    if not np.any(g):
-        g = np.array([0.0, 0.0, -9.81])
-    u = static_displacement(run, g)
-    held = held_spheres(run)
-    mass = run.density * 4.0 / 3.0 * np.pi * run.radii ** 3
-    work = float(np.sum(mass * (u @ g)))
-    uu = float(np.sum(mass * np.einsum("ij,ij->i", u, u)))
-    if not (held.any() and work > 0 and uu > 0):
-        raise ValueError("no sphere is tied by bonds to a fixed sphere: the model has no first mode")
-    return math.sqrt(work / uu), float(mass[held].mean())
+    """(omega [rad/s], mean mass [kg]) of the run's first mode (dda.spheres.first_mode)."""
+    from dda.spheres import first_mode as network_first_mode
+
+    return network_first_mode(run.centers, _mass(run), _anchored(run), run.bond_i, run.bond_j, run.bond_kn,
+                              run.bond_ks, run.gravity)
 
 
 def viscous_coefficient(run, value):
     """c [N s/m] of a force -c v on every free sphere that damps the run's first mode (first_mode) at the ratio
     of critical damping `value` (a number, or "critical" = 1): c = 2 zeta m_mean omega_1. ValueError (a message
     for the user) when the value is not a ratio or the model has no first mode."""
-    zeta = damping_ratio(value)
-    if zeta == 0.0:
-        return 0.0
-    omega, m = first_mode(run)
-    return 2.0 * zeta * m * omega
+    from dda.spheres import viscous_coefficient as network_coefficient
+
+    return network_coefficient(damping_ratio(value), run.centers, _mass(run), _anchored(run), run.bond_i,
+                               run.bond_j, run.bond_kn, run.bond_ks, run.gravity)
 
 
 def _set_loads(run, force, prescribed, velocity):

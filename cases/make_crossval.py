@@ -11,7 +11,8 @@
   opens in the first swing and closes again as local damping brings the block to rest.
 - beam_joint, beam_settle: a 1.2 x 0.12 x 0.12 m FCC cantilever (r = 0.015, central bonds) fixed at x < 0.04:
   cut by a vertical joint through the lattice's centres at x = 0.6 (the part beyond it detaches), and intact,
-  damped by [simulation] viscous_damping = "critical" alone (LIGGGHTS' fix viscous): its static sag.
+  damped by [simulation] viscous_damping = "critical" alone (LIGGGHTS' fix viscous, in-house -c v): its static
+  sag.
 - wedge: the paper's wedge (joints 45/005 and 55/135, face 65/065, height 10 m) as FCC spheres (r = 0.5): the
   wedge's spheres bonded, the rock behind the joints fixed, the joints smooth: the friction at which it starts to
   slide against Hoek & Bray and the DDA block wedge.
@@ -140,8 +141,8 @@ def write_all(folder=HERE):
         {"duration": 0.06, "record_every": 0.002, "frames": 1}, beam_sim, beam_spheres)
     files["beam_settle.toml"] = dda_scene(
         "beam_settle", "The intact beam damped by viscous damping at the critical ratio of its first mode "
-        "(LIGGGHTS' fix viscous; the in-house engine and YADE have no such damping and list it): after 0.3 s "
-        "(16 / omega_1) its sag is the static one.", "beam_model.toml",
+        "(LIGGGHTS' fix viscous, the in-house engine's force -c v; YADE has no such damping and lists it): after "
+        "0.3 s (16 / omega_1) its sag is the static one.", "beam_model.toml",
         {"duration": 0.3, "record_every": 0.01, "viscous_damping": "critical", "frames": 1}, beam_sim,
         beam_spheres)
     lo, hi, cavities = wedge_cavities()

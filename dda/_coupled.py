@@ -419,8 +419,8 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
 
 
 @njit(cache=True)
-def sphere_update(dt, dt_prev, gravity, local_damp, x, v, w, m, inertia, fixed, kin, bforce, force, torque, acc,
-                  energy, res):
+def sphere_update(dt, dt_prev, gravity, local_damp, visc, x, v, w, m, inertia, fixed, kin, bforce, force, torque,
+                  acc, energy, res):
     """Central difference of the spheres (as dda/_spheres.py) and their energy terms. Returns False on a
     non-finite state."""
     n = x.shape[0]
@@ -432,8 +432,8 @@ def sphere_update(dt, dt_prev, gravity, local_damp, x, v, w, m, inertia, fixed, 
     for i in range(n):
         if fixed[i]:
             continue
-        ke, pe, d_loc, step_ok = advance_sphere(i, dt, dtavg, gravity, local_damp, x, v, w, m, inertia, kin, bforce,
-                                                force, torque, acc, ke, pe, d_loc)
+        ke, pe, d_loc, step_ok = advance_sphere(i, dt, dtavg, gravity, local_damp, visc, x, v, w, m, inertia, kin,
+                                                bforce, force, torque, acc, ke, pe, d_loc)
         ok &= step_ok
     energy[0] = ke
     energy[1] = pe - acc[0]
@@ -445,7 +445,7 @@ def sphere_update(dt, dt_prev, gravity, local_damp, x, v, w, m, inertia, fixed, 
 
 
 @njit(cache=True)
-def run_coupled(nsteps, resume, dt, dt_prev, t0, gravity, local_damp, first_step,
+def run_coupled(nsteps, resume, dt, dt_prev, t0, gravity, local_damp, visc, first_step,
                 x, v, w, r, m, sinertia, sfixed, skin, sbforce, lawrow, blawrow,
                 bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break, bkey_tab, bkey_slot,
                 ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
@@ -497,8 +497,8 @@ def run_coupled(nsteps, resume, dt, dt_prev, t0, gravity, local_damp, first_step
             break
         resume = False
         first_step = False
-        ok = sphere_update(dt, dt_prev, gravity, local_damp, x, v, w, m, sinertia, sfixed, skin, sbforce, sforce,
-                           storque, sacc, senergy, sres)
+        ok = sphere_update(dt, dt_prev, gravity, local_damp, visc, x, v, w, m, sinertia, sfixed, skin, sbforce,
+                           sforce, storque, sacc, senergy, sres)
         dt_prev = dt
         done += 1
         if st == BLOWUP or not ok:

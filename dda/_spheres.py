@@ -24,7 +24,8 @@ One step (central difference exactly as the block engine, dt(0) = 0 so the first
    Central bonds (ks_b = 0, as LIGGGHTS' harmonic bonds) carry the normal spring alone (no shear force, no
    torque, no shear breakage) and have a loop of their own over compact rows (``CI``, ``CB``), so that a model
    of central bonds costs one normal spring per bond;
-5. central difference for the free spheres (Cundall's local damping as an option).
+5. central difference for the free spheres (viscous damping -c v of every sphere and Cundall's local damping as
+   options; the work of both goes to the local damping term).
 Energy = [kinetic (product form), potential, elastic (contacts, joints and bonds), friction (+ released),
 damping, local damping]; the last three cumulative.
 
@@ -434,13 +435,13 @@ def _list_broken(i, j, fixed, kin, nl_pairs, nl_n, ncap, nl_flag):
 
 
 @njit(cache=True, inline="always")
-def advance_sphere(i, dt, dtavg, gravity, local_damp, X, V, W, m, inertia, kin, bforce, force, torque, acc,
+def advance_sphere(i, dt, dtavg, gravity, local_damp, visc, X, V, W, m, inertia, kin, bforce, force, torque, acc,
                    ke, pe, d_loc):
     """Central difference of sphere i (not fixed): a kinematic sphere moves at its prescribed
     velocity and the work of the forces on it goes to acc[0]; otherwise force + gravity + body
-    force, with local (Cundall) damping, updates its velocities (dtavg, the mean of the last two
-    steps) and its position (dt).  Adds its kinetic and potential energy and the damping work to
-    ke, pe, d_loc; returns them and False on a non-finite state."""
+    force, with viscous damping -visc v (v of the last half step) and local (Cundall) damping, updates
+    its velocities (dtavg, the mean of the last two steps) and its position (dt).  Adds its kinetic and
+    potential energy and the damping work to ke, pe, d_loc; returns them and False on a non-finite state."""
     ok = True
     if kin[i]:
         acc[0] -= dt * (force[i, 0] * V[i, 0] + force[i, 1] * V[i, 1] + force[i, 2] * V[i, 2]
@@ -451,6 +452,10 @@ def advance_sphere(i, dt, dtavg, gravity, local_damp, X, V, W, m, inertia, kin, 
     for a in range(3):
         f = force[i, a] + m[i] * gravity[a] + bforce[i, a]
         tq = torque[i, a]
+        if visc > 0.0:
+            fv = visc * V[i, a]
+            f -= fv
+            d_loc += fv * V[i, a] * dtavg
         if local_damp > 0.0:
             if V[i, a] != 0.0:
                 fd = local_damp * abs(f) * (1.0 if V[i, a] > 0 else -1.0)
@@ -473,7 +478,7 @@ def advance_sphere(i, dt, dtavg, gravity, local_damp, X, V, W, m, inertia, kin, 
 
 
 @njit(cache=True)
-def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
+def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, visc, t0,
                 x, v, w, r, m, inertia, fixed, kin, bforce, lawrow, wall_lawrow,
                 bi, bj, BB, b_intact, b_break, bstart, bnbr, bidx, bfull, cidx, CI, CB, cfn, czeta,
                 ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
@@ -827,8 +832,8 @@ def run_spheres(nsteps, dt, dt_prev, gravity, local_damp, t0,
         for i in range(n):
             if fixed[i]:
                 continue
-            ke, pe, d_loc, ok = advance_sphere(i, dt, dtavg, gravity, local_damp, X, V, W, m, inertia, kin, bforce,
-                                               force, torque, acc, ke, pe, d_loc)
+            ke, pe, d_loc, ok = advance_sphere(i, dt, dtavg, gravity, local_damp, visc, X, V, W, m, inertia, kin,
+                                               bforce, force, torque, acc, ke, pe, d_loc)
             blown |= not ok
             e0 = X[i, 0] - x_ref[i, 0]
             e1 = X[i, 1] - x_ref[i, 1]

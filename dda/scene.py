@@ -7,7 +7,7 @@ written. Keys::
     [simulation]   duration (s, required), dt (0 or absent: automatic), safety = 0.5, gravity = [0, 0, -9.81],
                    local_damping = 0.0, viscous_damping = 0.0 (sphere decks: a force -c v on every sphere, c
                    for this ratio of critical damping of the model's first mode, or "critical"; LIGGGHTS' fix
-                   viscous; the in-house engine and YADE list it as not represented), record_every (default
+                   viscous, the in-house engine's too; YADE lists it as not represented), record_every (default
                    duration / 100), frames = 20 (VTU frames),
                    sleep = false (resting blocks stop being integrated), sleep_velocity (m/s), sleep_accel
                    (m/s2), sleep_steps = 200 (see dda/simulation.py for the defaults), max_steps = 1e8 (a run
@@ -148,8 +148,17 @@ class DDAScene:
         walls = self.blocks
         if moving:
             walls = self.block_system()  # moving blocks: one coupled loop with the spheres
+        visc = 0.0
+        if self.viscous_damping:  # a ratio of critical damping of the first mode -> c [N s/m]
+            from .spheres import viscous_coefficient
+
+            try:
+                visc = viscous_coefficient(self.viscous_damping, ss.centers, ss.mass, ss.fixed | ss.prescribed,
+                                           ss.bond_i, ss.bond_j, ss.bond_kn, ss.bond_ks, self.gravity)
+            except ValueError as exc:
+                raise SceneError(self.path, "simulation.viscous_damping", self.viscous_damping, str(exc)) from None
         sim = SphereSimulation(ss, self.law, walls=walls, gravity=self.gravity, dt=self.dt, safety=self.safety,
-                               local_damping=self.local_damping, pair_laws=self.pair_laws)
+                               local_damping=self.local_damping, pair_laws=self.pair_laws, viscous_damping=visc)
         from .limits import check_sphere_run
 
         check_sphere_run(self, ss, sim, max_steps=max_steps, duration=duration)

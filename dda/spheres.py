@@ -301,11 +301,14 @@ class SphereSimulation:
 
     def __init__(self, spheres: SphereSet, law: ContactLaw | None = None, walls=None, wall_law=None,
                  gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5, local_damping=0.0, record_positions=True,
-                 block_law=None, pair_laws=None):
+                 block_law=None, pair_laws=None, viscous_damping=0.0):
         self.spheres = ss = spheres
         self.law = law or ContactLaw()
         self.gravity = np.asarray(gravity, float).reshape(3)
         self.local_damping = float(local_damping)
+        self.viscous_damping = float(viscous_damping)  # c [N s/m]: a force -c v on every free sphere
+        if not (math.isfinite(self.viscous_damping) and self.viscous_damping >= 0.0):
+            raise ValueError(f"viscous damping must be a finite c >= 0 N s/m (got {viscous_damping!r})")
         self.record_positions = bool(record_positions)
         if ss.n_bonds and not np.all(np.isfinite(ss.bond_kn)):
             raise ValueError("bond stiffness must be finite")
@@ -466,7 +469,7 @@ class SphereSimulation:
             (status, done, fit, b.mstart, b.mentries, b.pa, b.pb, b.large_list, b.active, b.fstart,
              b.fentries) = _cp.run_coupled(
                 nsteps, self.resume, self.dt, self.dt_prev, self.time, self.gravity, self.local_damping,
-                b.first_step,
+                self.viscous_damping, b.first_step,
                 self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
                 self.lawrow, self.wall_lawrow,
                 ss.bond_i, ss.bond_j, ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta,
@@ -556,7 +559,7 @@ class SphereSimulation:
         ss = self.spheres
         while True:
             status, done = _sp.run_spheres(
-                nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.time,
+                nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.viscous_damping, self.time,
                 self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
                 self.lawrow, self.wall_lawrow,
                 ss.bond_i, ss.bond_j, self.bond_rows, self.bond_intact, self.bond_break_time, self.bond_start,
@@ -642,4 +645,86 @@ class SphereSimulation:
                 "shear": self.c_us[c, :k].copy()}
 
 
-__all__ = ["BondLaw", "SphereSet", "SphereSimulation", "SphereResults", "load_model"]
+def held_by_bonds(n, bond_i, bond_j, anchored):
+    """(n,) bool: the spheres not `anchored` (fixed or prescribed) that a path of bonds ties to an anchored one:
+    the part of a model that has a static equilibrium under its bonds."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    anchored = np.asarray(anchored, bool)
+    if n == 0:
+        return np.zeros(0, bool)
+    g = coo_matrix((np.ones(len(bond_i)), (np.asarray(bond_i), np.asarray(bond_j))), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    tied = np.zeros(lab.max() + 1, bool)
+    tied[lab[anchored]] = True
+    return tied[lab] & ~anchored
+
+
+def bond_network_static(centers, mass, anchored, bond_i, bond_j, bond_kn, bond_ks, gravity):
+    """Static displacement (n, 3) of a bond network under the weights m g: the sparse linear solve of K u = m g
+    over the spheres held by bonds (held_by_bonds; the others stay 0). Each bond is a normal spring kn along its
+    centre line plus a shear spring ks across it (central bonds: ks = 0; rotations left out). ValueError when
+    the network is a mechanism (no finite solution)."""
+    import warnings
+
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import spsolve
+
+    c = np.asarray(centers, float).reshape(-1, 3)
+    n = len(c)
+    i, j = np.asarray(bond_i, np.int64), np.asarray(bond_j, np.int64)
+    d = c[j] - c[i]
+    e = d / np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
+    ee = e[:, :, None] * e[:, None, :]
+    kn, ks = np.asarray(bond_kn, float), np.asarray(bond_ks, float)
+    blocks = kn[:, None, None] * ee + ks[:, None, None] * (np.eye(3)[None] - ee)  # (m, 3, 3)
+    rows, cols, vals = [], [], []
+    for a, b, s in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
+        for p in range(3):
+            for q in range(3):
+                rows.append(3 * a + p)
+                cols.append(3 * b + q)
+                vals.append(s * blocks[:, p, q])
+    K = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n))
+    K = K.tocsr()
+    f = (np.asarray(mass, float)[:, None] * np.asarray(gravity, float)[None, :]).ravel()
+    free = np.repeat(held_by_bonds(n, i, j, anchored), 3)
+    u = np.zeros(3 * n)
+    if free.any():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            u[free] = spsolve(K[free][:, free].tocsc(), f[free])
+        if not np.all(np.isfinite(u)):
+            raise ValueError("the bond network is a mechanism (no static solution)")
+    return u.reshape(n, 3)
+
+
+def first_mode(centers, mass, anchored, bond_i, bond_j, bond_kn, bond_ks, gravity):
+    """(omega [rad/s], mean mass [kg]) of a bond network's first mode: the Rayleigh quotient of its static
+    deflection under `gravity` (bond_network_static; straight down when gravity is zero) over the spheres held by
+    bonds. ValueError when no sphere is held."""
+    g = np.asarray(gravity, float).reshape(3)
+    if not np.any(g):
+        g = np.array([0.0, 0.0, -9.81])
+    mass = np.asarray(mass, float)
+    u = bond_network_static(centers, mass, anchored, bond_i, bond_j, bond_kn, bond_ks, g)
+    held = held_by_bonds(len(mass), bond_i, bond_j, anchored)
+    work = float(np.sum(mass * (u @ g)))
+    uu = float(np.sum(mass * np.einsum("ij,ij->i", u, u)))
+    if not (held.any() and work > 0 and uu > 0):
+        raise ValueError("no sphere is tied by bonds to a fixed sphere: the model has no first mode")
+    return math.sqrt(work / uu), float(mass[held].mean())
+
+
+def viscous_coefficient(zeta, centers, mass, anchored, bond_i, bond_j, bond_kn, bond_ks, gravity):
+    """c [N s/m] of a force -c v on every free sphere that damps the network's first mode (first_mode) at the
+    ratio of critical damping `zeta`: c = 2 zeta m_mean omega_1 (0 for zeta = 0). ValueError as first_mode."""
+    if zeta == 0.0:
+        return 0.0
+    omega, m = first_mode(centers, mass, anchored, bond_i, bond_j, bond_kn, bond_ks, gravity)
+    return 2.0 * float(zeta) * m * omega
+
+
+__all__ = ["BondLaw", "SphereSet", "SphereSimulation", "SphereResults", "bond_network_static", "first_mode",
+           "held_by_bonds", "load_model", "viscous_coefficient"]

@@ -157,7 +157,7 @@ def test_every_scene_key_reaches_every_deck_or_is_listed(models):
                 silent.append(f"{key} in {w}")
     assert not silent, f"keys neither carried nor listed in extra.approximations: {silent}"
     # what an engine cannot express, it lists: the expected gaps (so a carried-by-accident key shows up too)
-    assert table["simulation.viscous_damping", "in-house"] == "listed"
+    assert table["simulation.viscous_damping", "in-house"] == "carried"
     assert table["simulation.viscous_damping", "yade"] == "listed"
     assert table["simulation.viscous_damping", "liggghts-bonds"] == "carried"
     assert table["spheres.bond_damping", "in-house"] == "carried"
@@ -237,3 +237,29 @@ def test_critical_viscous_damping_of_a_sphere_on_one_bond(tmp_path):
     free = from_model(model)
     with pytest.raises(ValueError, match="first mode"):
         viscous_coefficient(free, "critical")
+
+
+def test_in_house_viscous_damping_critical_on_one_bond():
+    # the sphere hung from a fixed one by one bond, released at the bond's rest length under gravity, with
+    # c = 2 sqrt(k m): the critically damped response u(t) = u_s (1 - (1 + w t) e^(-w t)), u_s = m g / k
+    from adapters.spec import from_model
+    from sgim.builder import build_model
+    from sgim.scene import scene_from_dict
+
+    model = build_model(scene_from_dict({"name": "pair", "domain": {"min": [0, 0, 0], "max": [0.1, 0.1, 0.2]},
+                                         "packing": {"kind": "cubic", "radius": 0.05}, "bonds": {"rule": "colour"}},
+                                        "pair.toml"))
+    run = from_model(model, fixed=model.centers[:, 2] > 0.1, viscous_damping="critical", safety=0.05)
+    ss, sim = run.in_house()
+    free = int(np.flatnonzero(~run.fixed)[0])
+    m, k = float(ss.mass[free]), float(run.bond_kn[0])
+    w = math.sqrt(k / m)
+    u_s = m * 9.81 / k
+    for t in (1.0 / w, 3.0 / w, 8.0 / w):
+        sim.run(t - sim.time)
+        u = run.centers[free, 2] - sim.x[free, 2]
+        assert u == pytest.approx(u_s * (1.0 - (1.0 + w * t) * math.exp(-w * t)), rel=2e-2)
+    # undamped, the same sphere overshoots to twice the static stretch
+    ss2, sim2 = from_model(model, fixed=model.centers[:, 2] > 0.1, safety=0.05).in_house()
+    sim2.run(math.pi / w)
+    assert run.centers[free, 2] - sim2.x[free, 2] == pytest.approx(2.0 * u_s, rel=2e-2)
