@@ -57,10 +57,10 @@ class Report:
 def read_reports(rd, data, block_names, spheres):
     """The [[report]] tables of a scene (SceneError on a bad one); `block_names` the scene's blocks,
     `spheres` whether the scene has [spheres]."""
-    tabs = data.get("report", [])
-    if not isinstance(tabs, list) or any(not isinstance(t, dict) for t in tabs):
-        rd.err("report", tabs, "must be an array of tables ([[report]])")
+    from .scene import _list_of_tables, read_region_cuts  # (dda/scene.py calls this function)
+
     out = []
+    tabs = _list_of_tables(rd, data, "report")
     for k, t in enumerate(tabs):
         key = f"report[{k}]"
         rd.known(t, REPORT_KEYS, key)
@@ -73,8 +73,6 @@ def read_reports(rd, data, block_names, spheres):
         block = rd.string(t, "block", f"{key}.block", "") or None
         region = t.get("region")
         if region is not None:
-            from .scene import read_region_cuts
-
             if not spheres or where not in ("body", "any"):
                 rd.err(f"{key}.region", region, "a sphere region applies to displacement, velocity, "
                                                 "max_displacement and moved of runs with [spheres]")
