@@ -158,6 +158,7 @@ class CaseProcess:
             self._start()
 
     def _start(self):
+        self.warming = True  # until the server has imported the evaluator and run its warm-up
         self.proc = subprocess.Popen([sys.executable, "-m", "cases._caseserver"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, env=_child_env(self.study_dir, self.rank),
                                      start_new_session=True, bufsize=0)
@@ -181,7 +182,11 @@ class CaseProcess:
         (enforced by the server itself) plus a minute; with --reuse-process the limit itself (the case runs in
         the server)."""
         timeout = self.pending[0][1] if self.pending else None
-        return None if timeout is None else self.front_t0 + timeout + (0.0 if self.reuse else 60.0)
+        if timeout is None:
+            return None
+        if self.warming:  # imports and kernel compilation (a cold numba cache) are not the case's time
+            return self.front_t0 + max(timeout + 60.0, WARM_LIMIT_S)
+        return self.front_t0 + timeout + (0.0 if self.reuse else 60.0)
 
     def poll(self, wait):
         """[(tag, outcome dict)] of the cases finished within `wait` seconds (None: until one finishes)."""
@@ -199,6 +204,10 @@ class CaseProcess:
             if not ready:
                 break
             msg = _recv(self.fileno())
+            if isinstance(msg, dict) and msg.get("warmed"):
+                self.warming = False
+                self.front_t0 = time.perf_counter()
+                continue
             if msg is None:  # the case server died: every queued case is reported died (and handed out again)
                 rc = self.proc.wait()
                 self._reap()
@@ -811,6 +820,7 @@ def _died_row(outcome, attempts):
 # cases queued in a case server beyond the running one: the next case starts the moment one ends (no round trip
 # to rank 0); only while cases are short, so that no case waits behind a long one while a rank is idle
 PREFETCH_BELOW_S = 0.25
+WARM_LIMIT_S = 3600.0  # a case server's imports and warm-up (kernel compilation) before its first case
 
 
 def _serial(run, todo, local):

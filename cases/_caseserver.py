@@ -312,6 +312,7 @@ def main():
                         sys.stderr.flush()
                         os.dup2(saved_err, 1)
                         os.dup2(saved_err, 2)
+                _send(fout, {"warmed": True})  # the rank starts the case's clock now (compilation is not the case's)
             sys.stdout.flush()
             sys.stderr.flush()
             if req.get("reuse"):  # --reuse-process: the case runs here (no fork); its state stays for the next

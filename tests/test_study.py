@@ -900,3 +900,39 @@ def test_file_values_of_parameters_resolved_against_the_study_file(tmp_path):
     assert names == [str((tmp_path / "s" / "meshes" / "a.obj").resolve()),
                      str((tmp_path / "s" / "meshes" / "b.obj").resolve()), "not-a-file"]
     assert {"file meshes/a.obj", "file meshes/b.obj"} <= set(study.fingerprint())
+
+
+WARM_PLUGIN = '''
+import time
+WARMED = []
+
+def fast(scene_path, case_dir, params):
+    return {"warmed": len(WARMED)}
+
+def _warm(scene_path):
+    time.sleep(1.5)  # a cold kernel compilation
+    WARMED.append(1)
+
+fast.warm = _warm
+'''
+
+
+def test_warm_up_runs_once_per_rank_outside_the_time_limit(tmp_path):
+    """The evaluator's warm-up (kernel compilation) runs once in the case server, before the cases are forked from
+    it: every case sees it done, and its time does not count against the case's time limit."""
+    path = write_study(tmp_path, """
+        base = "base.toml"
+        evaluator = "warm_plugin:fast"
+        results = ["warmed"]
+        timeout = 0.5
+        [parameters]
+        "contact.friction" = { grid = [1.0, 2.0, 3.0] }
+    """)
+    (tmp_path / "warm_plugin.py").write_text(WARM_PLUGIN)
+    out = tmp_path / "out"
+    for extra in ([], ["--reuse-process"]):
+        shutil.rmtree(out, ignore_errors=True)
+        r = subprocess.run(cli("run", path, "-o", out, "--quiet", *extra), cwd=REPO, capture_output=True,
+                           text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+        assert [(row["status"], row["warmed"]) for row in read_table(out)] == [("ok", "1")] * 3, extra
