@@ -52,7 +52,8 @@ do not edit by hand: `tests/test_scene_docs.py` fails when this file is stale or
 Every table and key a scene may hold, with its type, default, range and unit. *Default* "required": the reader
 stops when the key is absent; "required (see meaning)": required in some forms of the table only; "—": optional
 without a default (what its absence means is in *meaning*). Ranges are those the reader checks (bounds in the
-key's unit; 1e+09 m is the coordinate guard). Units: SI as in the README (m, s, N, N/m, Pa, kg/m3, deg; "-"
+key's unit; 1e+09 m is the coordinate guard; ranges separated by ";" are checked in different forms of the table
+or one after the other). Units: SI as in the README (m, s, N, N/m, Pa, kg/m3, deg; "-"
 dimensionless; px pixels; empty for names, flags and tables). A key unknown to its table is refused with the
 allowed names, so every key below is all a table takes.
 

@@ -285,16 +285,16 @@ def dda_scenes():
     return {"blocks": blocks, "block_forms": forms, "spheres": spheres, "spheres_viscous": viscous}
 
 
-def record_dda(record, folder, case_files=()):
+def record_dda(record, folder, case_files=(), synthetic=True):
     """Record the DDA reader over the synthetic scenes (files written into `folder`; each also read without each
-    of its keys) and over `case_files` (DDA scene files)."""
+    of its keys; not when `synthetic` is false) and over `case_files` (DDA scene files)."""
     import tomllib
 
     from .scene import scene_from_dict
 
     write_scene_files(folder)
     (Path(folder) / "beam.toml").write_text(_BEAM)
-    for name, data in dda_scenes().items():
+    for name, data in (dda_scenes() if synthetic else {}).items():
         record.read(scene_from_dict, data, Path(folder) / f"{name}.toml", required=True)
     for f in case_files:
         record.read(scene_from_dict, tomllib.loads(Path(f).read_text(encoding="utf-8")), f)

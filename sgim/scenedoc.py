@@ -173,8 +173,12 @@ class _Recorder(_Reader):
         if self.depth == 0 and not key.startswith("generate["):  # read directly (not through number / vector /
             # matrix); [[generate]] parameters are the generator's, documented from its signature
             elem = re.search(r"\[\d+\]$", key)
-            self.record.note(key[:elem.start()] if elem else key, "list of numbers" if elem else "number", NODEFAULT,
-                             _range(positive, nonneg, lo, hi), unit)
+            base = key[:elem.start()] if elem else key
+            kind = "number"
+            if elem:  # an element of a list: the list's kind, if the reader named it already
+                kinds = self.record.keys.get(norm(base), {}).get("kinds", {})
+                kind = next((k for k in kinds if k.startswith("list of")), "list of numbers")
+            self.record.note(base, kind, NODEFAULT, _range(positive, nonneg, lo, hi), unit)
         return super().check_number(v, key, positive, nonneg, lo, hi, unit)
 
     def vector(self, tab, name, key, n=3, default=None, lo=None, hi=None, unit=""):
@@ -293,7 +297,8 @@ SGIM_KEYS = {
     "render.height": K("px", "picture height"),
     "limits": K("", "resource limits checked before the build (sgim/limits.py)"),
     "limits.max_spheres": K("-", "refuse a build estimated to make more spheres (a positive integer)",
-                            type="integer", absent="the machine's memory decides (sgim/limits.py)"),
+                            type="integer", absent="the spheres that fill half of the machine's memory "
+                                                   "(sgim/limits.py)"),
     "dfn": K("", "Monte-Carlo fracture network: seed and limit of the [[joint_set]] sampling, or a network file"),
     "dfn.seed": K("-", "seed of the network; the same seed gives the same network"),
     "dfn.max_fractures": K("-", "refuse a network that would need more fractures"),
@@ -305,7 +310,7 @@ SGIM_KEYS = {
     "joint_set[].dip_direction": K("deg", "dip direction of the mean plane"),
     "joint_set[].kappa": K("-", "Fisher concentration about the mean pole (> 0, <= 1e8)"),
     "joint_set[].p32": K("m2/m3", "fracture area inside the box per box volume (one of p32, count)"),
-    "joint_set[].count": K("-", "fractures reaching the domain (one of p32, count)"),
+    "joint_set[].count": K("-", "fractures reaching the domain, >= 1 (one of p32, count)", default="—"),
     "joint_set[].thickness": K("m", "0: joints; > 0: faults (red)"),
     "joint_set[].radius": K("m", "a number (constant radius) or a table with law = ..."),
     "joint_set[].radius.law": K("", "constant (value); power (exponent, min, max); lognormal (mu + sigma or "
@@ -413,19 +418,19 @@ def sgim_scenes():
                                                         "fine_distance": 1.0, "coarse_distance": 4.0,
                                                         "spread": 0.1}}}
     netfile = copy.deepcopy(base) | {"dfn": {"file": "network.csv", "max_fractures": 10}}
-    return {"lattice": full, "cavities": cav, "joint_sets": dfn, "random_radius": rnd, "random_uniform": uni, "random_lognormal": logn,
-            "random_sieve": sieve, "random_graded": graded, "dfn_file": netfile}
+    return {"lattice": full, "cavities": cav, "joint_sets": dfn, "random_radius": rnd, "random_uniform": uni,
+            "random_lognormal": logn, "random_sieve": sieve, "random_graded": graded, "dfn_file": netfile}
 
 
-def record_sgim(record, folder, case_files=()):
+def record_sgim(record, folder, case_files=(), synthetic=True):
     """Record the sgim reader over the synthetic scenes (mesh files written into `folder`; each also read
-    without each of its keys) and over `case_files` (sgim scene files)."""
+    without each of its keys; not when `synthetic` is false) and over `case_files` (sgim scene files)."""
     import tomllib
 
     from .scene import scene_from_dict
 
     write_scene_files(folder)
-    for name, data in sgim_scenes().items():
+    for name, data in (sgim_scenes() if synthetic else {}).items():
         record.read(scene_from_dict, data, Path(folder) / f"{name}.toml", required=True)
     for f in case_files:
         record.read(scene_from_dict, tomllib.loads(Path(f).read_text(encoding="utf-8")), f)
