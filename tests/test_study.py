@@ -936,3 +936,18 @@ def test_warm_up_runs_once_per_rank_outside_the_time_limit(tmp_path):
                            text=True, timeout=60)
         assert r.returncode == 0, r.stderr
         assert [(row["status"], row["warmed"]) for row in read_table(out)] == [("ok", "1")] * 3, extra
+
+
+@pytest.mark.parametrize("body,key,allowed", [
+    ('evaluater = "noop"\n"contact.friction" = 1', "evaluater", "evaluator"),
+    ('evaluator = "noop"\n[parameters]\n"contact.friction" = { gird = [1.0] }', "contact.friction", "grid, list"),
+    ('evaluator = "noop"\n[parameters]\n"contact.friction" = { grid = [1.0] }\n[sampling]\nmetod = "grid"',
+     "sampling.metod", "method, samples"),
+    ('evaluator = "noop"\n[parameters]\n"contact.friction" = { grid = [1.0] }\n[sampling]\nmethod = "lhs2"',
+     "sampling.method", "grid, random, lhs, realisations"),
+    ('evaluator = "nop"\n[parameters]\n"contact.friction" = { grid = [1.0] }', "evaluator", "noop")])
+def test_study_typos_answered_with_the_allowed_names(tmp_path, capsys, body, key, allowed):
+    path = write_study(tmp_path, 'base = "base.toml"\n' + body + "\n")
+    assert main(["list", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and key in err and allowed in err and "Traceback" not in err, err
