@@ -260,3 +260,24 @@ def test_adapters_run_writes_paraview_frames_for_every_engine(tmp_path, engine):
         r = _adapters("export", out / "result.npz", "--to", "yade", "-o", tmp_path / "no", "--quiet")
         assert r.returncode == 2 and "exports to vtu only" in r.stderr and len(r.stderr.splitlines()) == 1
         assert not (tmp_path / "no").exists()
+
+
+def test_result_without_records_or_run_gives_start_and_end_frames(tmp_path):
+    """A result too large for records (pos None) and without its deck's run.npz: two frames (start, end) with
+    positions and displacements only, and an empty bond list in final.vtu."""
+    from adapters.frames import export_result
+
+    rng = np.random.default_rng(5)
+    x0 = rng.random((7, 3))
+    res = RunResult(engine="liggghts", x0=x0, final_pos=x0 + 0.1, final_vel=np.ones((7, 3)),
+                    bond_intact=np.ones(4, bool), time=np.array([0.0, 0.5, 1.0]), pos=None, steps=100, dt=0.01)
+    res.save(tmp_path / "result")
+    info = export_result(tmp_path / "result" / "result.npz", tmp_path / "pv")
+    assert info["run"] is None and info["frames"] == 2
+    entries = _pvd(tmp_path / "pv" / "result.pvd")
+    assert [t for t, _ in entries] == [0.0, 1.0]
+    end = meshio.read(tmp_path / "pv" / entries[1][1])
+    assert np.array_equal(end.points, x0 + 0.1) and "radius" not in end.point_data
+    assert np.allclose(end.point_data["displacement_magnitude"], np.sqrt(0.03))
+    fin = meshio.read(tmp_path / "pv" / "final.vtu")
+    assert "line" not in fin.cells_dict and np.array_equal(fin.point_data["velocity"], np.ones((7, 3)))
