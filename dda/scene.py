@@ -407,13 +407,21 @@ GENERATOR_SIZES = {"size", "height", "b", "h", "depth", "base_length", "base_thi
                    "spacing", "side", "clearance", "gap", "run", "margin"}  # [[generate]] lengths [m]
 
 
+def generator_parameters(fn):
+    """The parameters a scene may give a [[generate]] function (its progress callback is the run's)."""
+    import inspect
+
+    return [p for p, s in inspect.signature(fn).parameters.items()
+            if s.kind in (s.POSITIONAL_OR_KEYWORD, s.KEYWORD_ONLY) and p != "progress"]
+
+
 def _generator_types(rd, fn, params, key):
     """A [[generate]] parameter whose default is a number, a string, a flag or a list of numbers must be given as
     one (the generators would convert "13" to 13 without a word)."""
     import inspect
 
     sig = inspect.signature(fn).parameters
-    allowed = [p for p, s in sig.items() if s.kind in (s.POSITIONAL_OR_KEYWORD, s.KEYWORD_ONLY)]
+    allowed = generator_parameters(fn)
     for p, v in params.items():
         if p not in allowed:
             import difflib

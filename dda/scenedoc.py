@@ -11,6 +11,7 @@ from pathlib import Path
 from sgim.scenedoc import K, show, write_scene_files
 
 from .generate import GENERATORS
+from .scene import generator_parameters
 
 _LAW = {
     "kn": K("N/m", "normal stiffness per contact point"),
@@ -204,7 +205,6 @@ GENERATOR_PARAMS = {
         "floor": K("", "add a fixed floor under the box"),
         "sliver": K("", "what becomes of sliver pieces (dda/cut.py)"),
         "material": _MAT,
-        "progress": K("", "a progress callback (Python use only, not from a scene)"),
     },
 }
 
@@ -214,8 +214,8 @@ def generator_params():
     out = {}
     for kind, fn in GENERATORS.items():
         sig = inspect.signature(fn).parameters
-        out[kind] = [(p, show(s.default) if s.default is not s.empty else "required") for p, s in sig.items()
-                     if s.kind in (s.POSITIONAL_OR_KEYWORD, s.KEYWORD_ONLY)]
+        out[kind] = [(p, show(sig[p].default) if sig[p].default is not sig[p].empty else "required")
+                     for p in generator_parameters(fn)]
     return out
 
 

@@ -261,6 +261,7 @@ def test_a_generator_parameter_typo_names_the_allowed_parameters(tmp_path, capsy
     import inspect
 
     from dda.generate import GENERATORS
+    from dda.scene import generator_parameters
 
     scene = _write(tmp_path, 'name = "x"\n[simulation]\nduration = 1\n[contact]\nkn = 1e9\n'
                              '[[generate]]\nkind = "incline"\nangel = 30\n')
@@ -268,3 +269,5 @@ def test_a_generator_parameter_typo_names_the_allowed_parameters(tmp_path, capsy
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "generate[0].angel = 30" in line and "did you mean 'angle'" in line and "unexpected keyword" not in line
     assert line.endswith(", ".join(inspect.signature(GENERATORS["incline"]).parameters))
+    assert "progress" in inspect.signature(GENERATORS["box_cut"]).parameters  # the run's callback ...
+    assert "progress" not in generator_parameters(GENERATORS["box_cut"])  # ... is no scene key
