@@ -51,46 +51,15 @@ def cmd_run(args):
         path = Path(args.deck) / "run.npz"
         if not path.is_file():
             raise CliError(f"{args.deck}: no run.npz (a sphere deck is needed for --in-house)")
-        out = Path(args.output or Path(args.deck) / "result-dda")
-        with _frames_of(out, say):
-            res = run_inhouse(SphereRun.load(path), out=out, progress=say)
+        res = run_inhouse(SphereRun.load(path), out=args.output or Path(args.deck) / "result-dda", progress=say)
     else:
-        out = Path(args.output or Path(args.deck) / "result")
-        with _frames_of(out, say):
-            res = run(args.deck, out=out, np=args.np, timeout=args.timeout, progress=say)
+        res = run(args.deck, out=args.output, np=args.np, timeout=args.timeout, progress=say)
     summary = {"engine": res.engine, "status": res.status, "steps": res.steps, "wall_s": round(res.wall_s, 3),
                "bodies": res.n, "bonds_intact": int(res.bond_intact.sum()), "bonds": int(len(res.bond_intact)),
                "particle_steps_per_s": round(res.n * res.steps / res.wall_s) if res.wall_s > 0 else None}
     print(json.dumps(summary) if args.json else
           "  ".join(f"{k} {v}" for k, v in summary.items()))
     return 0
-
-
-class _frames_of:
-    """Around a run: its result (or an engine's partial result) also as ParaView frames in `out`
-    (adapters/frames.py: frames/*.vtu, result.pvd, final.vtu), whatever the engine."""
-
-    def __init__(self, out, say):
-        self.out, self.say = out, say
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        from .frames import find_run, write_frames
-        from .process import EngineError
-        from .result import RunResult
-
-        if exc_type is None:
-            res = RunResult.load(self.out)
-        elif issubclass(exc_type, EngineError) and exc.result is not None:
-            res = exc.result
-        else:
-            return False
-        info = write_frames(res, self.out, find_run(self.out, res.n)[0])
-        if self.say:
-            self.say(f"paraview   {self.out / 'result.pvd'} ({info['frames']} frames) and {self.out / 'final.vtu'}")
-        return False
 
 
 def main(argv=None):

@@ -269,7 +269,8 @@ def check_deck(deck, info):
 
 
 def run(deck, out=None, np=1, timeout=None, progress=None):
-    """Run the deck folder with its engine; the RunResult is saved into `out` (default DECK/result)."""
+    """Run the deck folder with its engine; the RunResult is saved into `out` (default DECK/result), with its
+    ParaView files (adapters/frames.py: frames/*.vtu, result.pvd, final.vtu), also for a partial result."""
     deck = Path(deck)
     info = read_deck(deck)
     if not (isinstance(np, int) and np >= 1):
@@ -285,7 +286,16 @@ def run(deck, out=None, np=1, timeout=None, progress=None):
         from .yade_poly import run_polyhedra_deck as run_deck
     else:
         from .liggghts import run_deck
-    return run_deck(deck, out, np=np, timeout=timeout, progress=progress)
+    from .frames import write_result_frames  # ParaView files beside the result, whatever the engine
+
+    try:
+        res = run_deck(deck, out, np=np, timeout=timeout, progress=progress)
+    except EngineError as exc:
+        if exc.result is not None:
+            write_result_frames(exc.result, out, deck / "run.npz", progress)
+        raise
+    write_result_frames(res, out, deck / "run.npz", progress)
+    return res
 
 
 __all__ = ["export", "run", "load_source", "read_deck", "check_deck", "write_vtu", "DeckError", "EngineError",

@@ -14,7 +14,9 @@ final.vtu              the end state: the spheres (as above, plus velocity [m/s]
 
 The run (adapters.spec.SphereRun, a deck's run.npz) gives radii, colours and the bond list; a result without
 one (a Polyhedra run: the "spheres" are block centroids) gets the positions and displacements only.
-``export_result(source, out)`` is ``adapters export RESULT --to vtu``: the same files in a new output folder.
+``adapters.run`` (deck.run) and ``run_inhouse(run, out)`` write them beside every result they save (a partial
+one included); ``export_result(source, out)`` is ``adapters export RESULT --to vtu``: the same files in a new
+output folder.
 """
 from __future__ import annotations
 
@@ -118,6 +120,24 @@ def write_frames(result: RunResult, folder, run=None):
     return {"frames": len(entries), "files": ["result.pvd", "final.vtu"] + [e[1] for e in entries]}
 
 
+def write_result_frames(result: RunResult, folder, run=None, progress=None):
+    """`write_frames` for a run's result folder: `run` a SphereRun, or the path of a run.npz (used when it
+    holds the result's spheres); a progress line names result.pvd. Called by adapters.run (deck.run) and
+    run_inhouse for every result they save, a partial one included."""
+    if run is not None and not hasattr(run, "radii"):
+        from .spec import SphereRun
+
+        try:
+            run = SphereRun.load(run) if Path(run).is_file() else None
+        except Exception:  # noqa: BLE001 - the deck was checked before the run; frames without it otherwise
+            run = None
+    info = write_frames(result, folder, run)
+    if progress:
+        progress(f"paraview   {Path(folder) / 'result.pvd'} ({info['frames']} frames), "
+                 f"{Path(folder) / 'final.vtu'}")
+    return info
+
+
 def export_result(source, out, force=False, progress=None):
     """``adapters export RESULT --to vtu -o OUT``: the result folder (or its result.npz) `source` as ParaView
     files in the output folder `out` (sgim/outdir.py rules): frames/*.vtu, result.pvd, final.vtu and
@@ -143,4 +163,4 @@ def export_result(source, out, force=False, progress=None):
     return info
 
 
-__all__ = ["write_frames", "export_result", "is_result", "find_run"]
+__all__ = ["write_frames", "write_result_frames", "export_result", "is_result", "find_run"]

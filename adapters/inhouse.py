@@ -78,7 +78,8 @@ def approximations(run):
 
 
 def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
-    """Run `run` (adapters.spec.SphereRun) in-house; RunResult (engine "dda"), saved into `out` when given."""
+    """Run `run` (adapters.spec.SphereRun) in-house; RunResult (engine "dda"), saved into `out` when given
+    (with its ParaView files: adapters/frames.py)."""
     from dda.simulation import BlowUpError
 
     t_setup = time.perf_counter()
@@ -122,7 +123,10 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
                                "pair_list_builds": int(sim.stats[7]),
                                "smooth_joints": int(ss.n_joints), "threads": 1})
         if out is not None:
+            from .frames import write_result_frames
+
             res.save(Path(out))
+            write_result_frames(res, out, run, progress)  # ParaView files beside the result
         return res
 
     record()
