@@ -951,3 +951,27 @@ def test_study_typos_answered_with_the_allowed_names(tmp_path, capsys, body, key
     assert main(["list", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and key in err and allowed in err and "Traceback" not in err, err
+
+
+def test_sigterm_under_mpirun_keeps_the_finished_rows(tmp_path):
+    """A scheduler's SIGTERM to mpirun: it forwards the signal to the ranks, which stop their cases and close the
+    table; the same command finishes the study with no case lost or run twice."""
+    path = write_study(tmp_path, RESTART_STUDY.replace("list = [0.15]", "list = [0.4]"))
+    study = load_study(path)
+    out = tmp_path / "out"
+    p = subprocess.Popen(mpirun_cmd(2) + cli("run", path, "-o", out, "--quiet"), cwd=REPO,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while time.time() - t0 < 60:
+        if (out / "results.csv").exists() and len(read_table(out)) >= 3:
+            break
+        time.sleep(0.02)
+    p.send_signal(signal.SIGTERM)
+    assert p.wait(timeout=30) != 0
+    _wait_unlocked(out)
+    first = {row["case_id"]: row for row in read_table(out)}
+    assert 3 <= len(first) < len(study.cases)
+    r = subprocess.run(cli("run", path, "-o", out, "--quiet"), cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    rows = _check_complete(study, out)
+    assert {row["case_id"]: row for row in rows if row["case_id"] in first} == first
