@@ -205,7 +205,7 @@ def _run_spheres(scene, out, dest, max_steps, say, t0):
                 save_mesh(blocks, tmp / "blocks.vtu")
         if "png" in formats:
             render_meshes(tmp / "final.png", blocks=blocks, spheres=spheres, width=scene.width,
-                          height=scene.height, title=scene.name)
+                          height=scene.height, title=scene.name, time=sim.time)
             if say:
                 say(f"render     {out / 'final.png'}")
         e = res.energy[-1]
