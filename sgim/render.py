@@ -412,10 +412,10 @@ def _draw_cut(frame, cuts, lo, hi, pad):
 def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_away=(), width=1600, height=1100,
            title=None):
     """model.png: the spheres in the paper's colours (intact, red fault, green / blue joint sides) seen from the
-    -x, -y side (azimuth -150 degrees) 35 degrees above the horizon through a parallel camera fitted to the model, with a legend of
-    the colours drawn, axes in metres, a scale bar, and the cut-away region (a sphere is cut away when it
-    satisfies every condition of `cut_away`) outlined in orange. Only numpy work per sphere: the spheres are
-    point sprites of their true size on screen."""
+    -x, -y side (azimuth -150 degrees) 35 degrees above the horizon through a parallel camera fitted to the
+    model, with a legend of the colours drawn, axes in metres, a scale bar, and the cut-away region (a sphere is
+    cut away when it satisfies every condition of `cut_away`) outlined in orange. Only numpy work per sphere:
+    the spheres are point sprites of their true size on screen."""
     import pyvista as pv
 
     cuts = parse_cuts(cut_away)
