@@ -32,6 +32,13 @@ def test_incline_states_its_slide_distance_against_the_analytical_reference(tmp_
     assert code == 0
     summary = json.loads(cap.out)  # --json: the summary alone on stdout
     assert summary == json.loads((out / "summary.json").read_text())
+    # progress lines: the whole run's simulated time (10 frames of 0.1 s: not 100 % at every frame's end),
+    # steps per second, and no temporary folder named
+    steps = [ln for ln in cap.err.splitlines() if "] t = " in ln]
+    pct = [float(ln.split("(")[1].split("%")[0]) for ln in steps]
+    assert steps and all(" of 1 s (" in ln for ln in steps) and pct == sorted(pct) and pct[-1] == 100.0
+    assert pct.count(100.0) == 1 and "steps/s" in steps[-1]
+    assert ".part" not in cap.err and ".rockdem" not in cap.err and str(out) in cap.err
     (a,) = summary["answers"]
     g, alpha, phi = 9.81, math.radians(30.0), math.radians(20.0)
     exact = 0.5 * g * (math.sin(alpha) - math.tan(phi) * math.cos(alpha)) * summary["time"] ** 2
