@@ -121,7 +121,8 @@ class DDAScene:
     max_steps: int | None = None  # [simulation] max_steps or [limits] max_steps (None: dda.limits default)
     max_steps_key: str = "simulation.max_steps"
     reports: list = field(default_factory=list)  # [[report]]: dda.answers.Report (empty: the default answers)
-    viscous_damping: float = 0.0  # [simulation] viscous_damping: ratio of critical of the first mode (sphere decks)
+    viscous_damping: float | str = 0.0  # [simulation] viscous_damping: ratio of critical of the first mode, or
+    # "critical" (sphere runs)
 
     def build_spheres(self, max_steps=None, duration=None):
         """SphereSet and SphereSimulation of a scene with [spheres] (its blocks are fixed walls).
@@ -153,8 +154,9 @@ class DDAScene:
             from .spheres import viscous_coefficient
 
             try:
-                visc = viscous_coefficient(self.viscous_damping, ss.centers, ss.mass, ss.fixed | ss.prescribed,
-                                           ss.bond_i, ss.bond_j, ss.bond_kn, ss.bond_ks, self.gravity)
+                zeta = 1.0 if self.viscous_damping == "critical" else float(self.viscous_damping)
+                visc = viscous_coefficient(zeta, ss.centers, ss.mass, ss.fixed | ss.prescribed, ss.bond_i,
+                                           ss.bond_j, ss.bond_kn, ss.bond_ks, self.gravity)
             except ValueError as exc:
                 raise SceneError(self.path, "simulation.viscous_damping", self.viscous_damping, str(exc)) from None
         sim = SphereSimulation(ss, self.law, walls=walls, gravity=self.gravity, dt=self.dt, safety=self.safety,
@@ -530,7 +532,7 @@ def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
         if isinstance(vd, str):
             if vd != "critical":
                 rd.err("simulation.viscous_damping", vd, 'must be a ratio of critical damping or "critical"')
-            viscous_damping = 1.0
+            viscous_damping = vd
         else:
             viscous_damping = rd.number(st, "viscous_damping", "simulation.viscous_damping", nonneg=True, hi=1e3)
     record_every = rd.number(st, "record_every", "simulation.record_every", default=duration / 100, positive=True)

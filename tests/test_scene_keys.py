@@ -263,3 +263,24 @@ def test_in_house_viscous_damping_critical_on_one_bond():
     ss2, sim2 = from_model(model, fixed=model.centers[:, 2] > 0.1, safety=0.05).in_house()
     sim2.run(math.pi / w)
     assert run.centers[free, 2] - sim2.x[free, 2] == pytest.approx(2.0 * u_s, rel=2e-2)
+
+
+def test_critical_damping_without_a_first_mode_is_one_line(models, tmp_path, capsys):
+    # nothing fixed: no sphere is tied to a fixed one, so "critical" has no first mode to refer to
+    from adapters.cli import main
+    from dda.scene import load_scene
+    from sgim.scene import SceneError
+
+    tables = {t: dict(v) for t, v in BASE.items()}
+    tables["spheres"]["fixed"] = []
+    tables["simulation"]["viscous_damping"] = "critical"
+    path = write_scene(models / "unheld.toml", tables)
+    assert main(["export", str(path), "--to", "liggghts", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "simulation.viscous_damping = 'critical'" in err[0] and "first mode" in err[0]
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(SceneError, match="first mode"):
+        load_scene(path).build_spheres()
+    tables["simulation"]["viscous_damping"] = "sometimes"
+    with pytest.raises(SceneError, match="viscous_damping"):
+        load_scene(write_scene(models / "bad.toml", tables))
