@@ -1,11 +1,7 @@
 """The Python API of the package tops (docs/api.md): the names exist, carry docstrings and do what the command
-line does; cases/example_api.py, the notebook-style walk, runs and its numbers agree with their references
-(the analytical slide of a block on an incline, YADE's run of the same deck)."""
+line does. cases/example_api.py, the notebook-style walk, runs in tests/test_readme_walk.py with the README's
+other lines, which checks its numbers against their references."""
 import json
-import math
-import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -58,17 +54,3 @@ def test_dda_run_in_memory_writes_nothing_and_matches_the_folder_run(tmp_path, m
     assert [a["value"] for a in mem.answers] == [a["value"] for a in disk.answers]
     (a,) = mem.answers
     assert a["quantity"] == "shortening" and a["value"] == pytest.approx(2600 * 9.81 * 4 / (2 * 1e8), rel=1e-3)
-
-
-def test_the_example_walk_runs_and_agrees_with_its_references(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "cases.example_api", str(tmp_path / "ex")], cwd=ROOT,
-                       capture_output=True, text=True, timeout=900)
-    assert p.returncode == 0, p.stderr[-3000:]
-    out = p.stdout
-    slide = re.search(r"slide distance: ([0-9.]+) m, analytical ([0-9.]+) m", out)
-    assert slide and float(slide[1]) == pytest.approx(float(slide[2]), rel=1e-3)
-    g, a, f = 9.81, math.radians(30), math.radians(20)
-    assert float(slide[2]) == pytest.approx(0.5 * g * (math.sin(a) - math.tan(f) * math.cos(a)), rel=1e-3)
-    dz = re.search(r"YADE (-?[0-9.]+) um, in-house (-?[0-9.]+) um", out)
-    assert dz and float(dz[1]) < 0 and float(dz[2]) == pytest.approx(float(dz[1]), rel=1e-3)
-    assert (tmp_path / "ex" / "deck" / "result" / "result.npz").is_file()
