@@ -29,7 +29,7 @@ def cmd_export(args):
             print(json.dumps(info, indent=2))
         return 0
     overrides = {"duration": args.duration, "dt": args.dt, "record_every": args.record_every,
-                 "viscous_damping": args.viscous_damping}
+                 "viscous_damping": args.viscous_damping, "liggghts_joints": args.liggghts_joints}
     info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say,
                   max_steps=positive_int(args.max_steps, "--max-steps"), force=args.force)
     if args.json:
@@ -80,6 +80,10 @@ def main(argv=None):
                                                             "c for this ratio of critical damping of the model's "
                                                             "first mode, or 'critical' (overrides [simulation] "
                                                             "viscous_damping)")
+    p.add_argument("--liggghts-joints", metavar="HOW", help="liggghts: contact (joint pairs are plain contacts) | "
+                                                            "open (no contact between green and blue spheres: exact "
+                                                            "while the joints stay open; overrides [spheres] "
+                                                            "liggghts_joints)")
     p.add_argument("--max-steps", metavar="N", help="refuse a deck of more than N steps (duration / dt; overrides "
                                                     "the scene's [simulation] max_steps, default 1e8)")
     p.add_argument("--json", action="store_true", help="print deck.json")

@@ -8,7 +8,8 @@
 - an sgim ``model.npz``: run with default settings;
 - a ``run.npz`` (a deck's SphereRun): as it is.
 
-``overrides`` (duration, dt, record_every, viscous_damping) shorten or change the run. ``to`` is one of:
+``overrides`` (duration, dt, record_every, viscous_damping, liggghts_joints) shorten or change the run. ``to`` is
+one of:
 
 =========  ======================================================================
 yade       DECK/script.py + run.npz (JCFpm bonded spheres), or a Polyhedra deck
@@ -113,6 +114,20 @@ def _apply_overrides(run, ov, path):
     if "duration" in ov and "record_every" not in ov:
         run.record_every = run.duration / 100 if run.record_every > run.duration else run.record_every
     run.record_every = min(run.record_every, run.duration)
+    if "liggghts_joints" in ov:  # --liggghts-joints: how a LIGGGHTS deck writes the joint pairs
+        from .spec import LIGGGHTS_JOINTS
+
+        raw = ov["liggghts_joints"]
+        if raw not in LIGGGHTS_JOINTS:
+            raise DeckError(f"{path}: --liggghts-joints = {raw!r}: must be one of {', '.join(LIGGGHTS_JOINTS)}")
+        if raw == "open" and not run.smooth_joints:
+            raise DeckError(f"{path}: --liggghts-joints = 'open': stands in for smooth joints, but the run has "
+                            "smooth_joints = false")
+        run.liggghts_joints = raw
+        from .liggghts import open_joint_problem
+
+        if open_joint_problem(run):
+            raise DeckError(f"{path}: --liggghts-joints = 'open': {open_joint_problem(run)}")
     if "viscous_damping" in ov:  # --viscous-damping: a ratio of critical damping of the first mode, or critical
         from .spec import viscous_coefficient
 
@@ -142,6 +157,8 @@ def export(source, to, out, variant=None, overrides=None, progress=None, max_ste
     if variant is not None and variant not in VARIANTS.get(to, ()):
         raise DeckError(f"--variant: {variant!r} is not a {to} variant "
                         f"(choose from {', '.join(VARIANTS.get(to, ())) or 'none'})")
+    if (overrides or {}).get("liggghts_joints") is not None and to != "liggghts":
+        raise DeckError(f"--liggghts-joints: for --to liggghts only, not {to}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise DeckError(f"{out}: output exists and is not a folder")

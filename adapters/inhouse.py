@@ -74,7 +74,9 @@ def reordered(run, perm):
 
 def approximations(run):
     """What the in-house engine does not represent of `run`: strings naming the scene key (RunResult.extra)."""
-    return []  # every key of a run: bonds, joints, loads, contact, local, viscous and bond damping
+    from .spec import liggghts_only
+
+    return liggghts_only(run)  # every key of a run: bonds, joints, loads, contact, local, viscous and bond damping
 
 
 def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:

@@ -60,7 +60,16 @@ What LIGGGHTS-PUBLIC cannot do exactly (listed per run in RunResult.extra["appro
   neighbours get it only beyond a compressive strain of about 2e-3, and unbonded pairs start 2e-3 r apart;
 - bond breakage is checked by the runner between chunks of run.record_steps steps (run.extra
   ``liggghts_check_steps`` for a shorter check), not every step;
-- no smooth joint: joint pairs are plain contacts along the centre line (with the joint friction);
+- no smooth joint: joint pairs are plain contacts along the centre line (with the joint friction), unless
+  run.liggghts_joints = "open" ([spheres] liggghts_joints, ``adapters export --liggghts-joints open``): then
+  ``neigh_modify exclude type`` drops every contact between a green and a blue atom type (the two sides of a
+  joint), which is a smooth joint's behaviour while it is open (no force) and wrong when it closes in
+  compression (the spheres pass through each other). A run whose touching green-blue pairs are not exactly its
+  joint pairs (a joint pair of one colour, e.g. the geometric bond rule; a green sphere of one joint touching a
+  blue one of another) is refused (``open_joint_problem``). The notes list it, also that green-blue pairs that
+  first meet during the run get no contact either; the runner reports the
+  largest closure of a joint pair along its joint normal (extra ``joint_closure_max`` [m],
+  ``joint_pairs_closed_max``), the error the option makes;
 - Cundall's local damping does not exist in LIGGGHTS-PUBLIC: runs are undamped unless run.viscous_damping
   ([simulation] viscous_damping: a ratio of critical damping of the model's first mode, or "critical";
   ``adapters export --viscous-damping``) or run.extra ``liggghts_viscous`` = gamma [kg/s] adds ``fix viscous``
@@ -317,9 +326,12 @@ def approximations(run: SphereRun, variant):
     if variant == "bonds" and bond_gap(run) > 0:
         out.append(f"contact radius r (1 - {bond_gap(run):g}) (masses kept): bonded pairs get the granular "
                    f"contact only beyond a compressive strain of about {2 * bond_gap(run):g}")
-    if len(run.joint_i) and run.smooth_joints:
+    if open_joints(run):
+        out += open_joint_notes(run)
+    elif len(run.joint_i) and run.smooth_joints:
         out.append("spheres.smooth_joints not represented (LIGGGHTS-PUBLIC has no smooth joint): joint pairs are "
-                   "plain contacts along the centre line (joint friction on green-blue type pairs)")
+                   "plain contacts along the centre line (joint friction on green-blue type pairs); "
+                   "spheres.liggghts_joints = \"open\" drops their contact instead")
     if run.damping > 0:
         out.append("contact damping with the effective mass of the mean sphere; Coulomb limit on the damped "
                    "normal force")
@@ -332,6 +344,88 @@ def approximations(run: SphereRun, variant):
         out.append(f"viscous damping fix viscous {c:g} kg/s acts on absolute velocities (also slows free fall: "
                    "terminal velocity m g / c)")
     return out
+
+
+# -- spheres.liggghts_joints = "open" --------------------------------------------------------------------
+GREEN_TYPES, BLUE_TYPES = (3, 7), (4, 8)  # atom_types: colour + 1, + 4 when fixed or prescribed
+
+
+def open_joints(run: SphereRun):
+    """True when the deck drops the contact across the joints (spheres.liggghts_joints = "open", smooth joints
+    on, some joint pair)."""
+    return run.liggghts_joints == "open" and bool(run.smooth_joints) and len(run.joint_i) > 0
+
+
+def joint_exclusions(run: SphereRun):
+    """(type a, type b) pairs of ``neigh_modify exclude type`` for spheres.liggghts_joints = "open": every green
+    type with every blue type (the two sides of a joint in the colour rule); [] otherwise."""
+    if not open_joints(run):
+        return []
+    return [(a, b) for a in GREEN_TYPES for b in BLUE_TYPES]
+
+
+def green_blue_extra(run: SphereRun, tol=1e-6):
+    """Pairs that the exclusion by type drops besides the joint pairs: green-blue pairs that touch at the start
+    (centre distance <= (r_i + r_j)(1 + tol)) and are not joint pairs (e.g. a green sphere of one joint touching
+    a blue one of another), as (i, j) arrays with i < j."""
+    from scipy.spatial import cKDTree
+
+    c = np.asarray(run.colour, np.int64)
+    gb = np.flatnonzero((c == 2) | (c == 3))
+    if not len(gb):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    x, r = np.asarray(run.centers, float)[gb], np.asarray(run.radii, float)[gb]
+    pairs = cKDTree(x).query_pairs(2.0 * float(r.max()) * (1.0 + tol), output_type="ndarray").reshape(-1, 2)
+    i, j = gb[pairs[:, 0]], gb[pairs[:, 1]]
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    d = np.linalg.norm(run.centers[j] - run.centers[i], axis=1)
+    keep = (c[i] != c[j]) & (d <= (run.radii[i] + run.radii[j]) * (1.0 + tol))
+    i, j = i[keep], j[keep]
+    ji, jj = np.minimum(run.joint_i, run.joint_j), np.maximum(run.joint_i, run.joint_j)
+    known = set(zip(ji.tolist(), jj.tolist()))
+    other = np.array([(a, b) not in known for a, b in zip(i.tolist(), j.tolist())], bool)
+    return i[other] if len(i) else i, j[other] if len(j) else j
+
+
+def open_joint_problem(run: SphereRun):
+    """Why the exclusion by type cannot express the run's joint pairs (None when it can): at the start the green-blue
+    pairs that touch must be exactly the joint pairs. Not so when a joint pair joins two spheres of one colour or
+    a touching green-blue pair is no joint pair (e.g. the geometric bond rule, or a green sphere of one joint
+    touching a blue one of another)."""
+    if not open_joints(run):
+        return None
+    c = np.asarray(run.colour, np.int64)
+    same = int(np.sum(~(((c[run.joint_i] == 2) & (c[run.joint_j] == 3)) | ((c[run.joint_i] == 3) &
+                                                                          (c[run.joint_j] == 2)))))
+    extra = len(green_blue_extra(run)[0])
+    if not (same or extra):
+        return None
+    what = [f"{same} joint pairs are not green-blue (they would keep their contact)"] if same else []
+    what += [f"{extra} touching green-blue pairs are not joint pairs (they would lose theirs)"] if extra else []
+    return ("the exclusion of green-blue contacts is not the model's joint pairs: " + " and ".join(what)
+            + '; use "contact"')
+
+
+def open_joint_notes(run: SphereRun):
+    """extra.approximations of spheres.liggghts_joints = "open"."""
+    out = [f'spheres.liggghts_joints = "open": no contact between green and blue spheres (neigh_modify exclude '
+           f"type, green types {' '.join(map(str, GREEN_TYPES))} with blue types "
+           f"{' '.join(map(str, BLUE_TYPES))}): the {len(run.joint_i)} joint pairs carry no force, as smooth joints "
+           "while they are open (exact for a joint that only opens or slides open); a joint that closes in "
+           "compression is not represented: its spheres pass through each other instead of pushing along the "
+           "joint normal (the runner reports the largest closure, result extra 'joint_closure_max'), and "
+           "spheres.joint_friction does not act",
+           "green-blue pairs that first meet during the run get no contact either (the smooth-joint engines give "
+           "them a plain contact)"]
+    return out
+
+
+def joint_closure(run: SphereRun, pos):
+    """Closure of each joint pair at the positions `pos` [m]: its gap along the joint normal at the start minus
+    now (> 0: the smooth joint would push)."""
+    i, j, n = run.joint_i, run.joint_j, run.joint_normal
+    d0 = np.einsum("ij,ij->i", run.centers[j] - run.centers[i], n)
+    return d0 - np.einsum("ij,ij->i", pos[j] - pos[i], n)
 
 
 def bond_gap(run):
@@ -433,6 +527,10 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     if variant == "bonds":
         L.append("bond_style harmonic")
     L += ["read_data data", f"neighbor {skin:.17g} bin", "neigh_modify delay 0"]
+    if open_joint_problem(run):
+        raise SpecError(f"{run.source or run.name}: spheres.liggghts_joints = open: {open_joint_problem(run)}")
+    for a, b in joint_exclusions(run):  # spheres.liggghts_joints = "open": no contact across a joint
+        L.append(f"neigh_modify exclude type {a} {b}")
     if variant == "clumps" and n_bodies:
         L.append(f"group clump molecule 1:{n_bodies}")
         L.append("neigh_modify exclude molecule clump")
@@ -488,6 +586,8 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     return {"variant": variant, "atom_types": N_TYPES, "bond_types": int(run.n_bonds) if variant == "bonds" else 0,
             "rigid_bodies": int(n_bodies), "box": [list(map(float, box[0])), list(map(float, box[1]))],
             "check_steps": check_steps(run), "approximations": approximations(run, variant),
+            "liggghts_joints": run.liggghts_joints if open_joints(run) else "contact",
+            "excluded_type_pairs": [list(p) for p in joint_exclusions(run)],
             "viscous_gamma_equivalent": viscous_gamma(run) if run.local_damping > 0 else 0.0}
 
 
@@ -598,6 +698,8 @@ def _run_deck(folder, out, nprocs, timeout, progress):
     state = {"pos": run.centers.copy(), "vel": np.zeros((n, 3)), "step": 0}
     extra = {"variant": variant, "np": nprocs, "approximations": info.get("approximations")
              or approximations(run, variant), "bond_check_steps": chk, "broken_by_runner": 0}
+    if open_joints(run):  # the case the exclusion does not represent: a joint pair closing beyond its start gap
+        extra.update(liggghts_joints="open", joint_closure_max=0.0, joint_pairs_closed_max=0)
     t0 = time.perf_counter()
     deadline = None if timeout is None else t0 + float(timeout)
 
@@ -630,6 +732,10 @@ def _run_deck(folder, out, nprocs, timeout, progress):
 
     def record(omega):
         times.append(state["step"] * run.dt)
+        if open_joints(run):
+            closure = joint_closure(run, state["pos"])
+            extra["joint_closure_max"] = max(extra["joint_closure_max"], float(max(closure.max(), 0.0)))
+            extra["joint_pairs_closed_max"] = max(extra["joint_pairs_closed_max"], int(np.sum(closure > 0.0)))
         v, w = state["vel"][mobile], omega[mobile]
         kin.append(float(0.5 * np.sum(mass[mobile] * np.einsum("ij,ij->i", v, v))
                          + 0.5 * np.sum(inertia[mobile] * np.einsum("ij,ij->i", w, w))))
@@ -696,4 +802,5 @@ def _run_deck(folder, out, nprocs, timeout, progress):
 
 
 __all__ = ["write_deck", "run_deck", "VARIANTS", "atom_types", "components", "clump_molecules",
-           "cohesion_matrix", "approximations", "clump_prescribed", "load_groups", "MAX_LOAD_GROUPS"]
+           "cohesion_matrix", "approximations", "clump_prescribed", "load_groups", "MAX_LOAD_GROUPS", "open_joints",
+           "open_joint_problem", "joint_exclusions", "open_joint_notes", "joint_closure"]

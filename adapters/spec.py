@@ -13,6 +13,8 @@ in-house (dda.spheres), in YADE or in LIGGGHTS:
   ``joint_normal`` (n, 3): the discontinuity's unit normal at the pair, signed to point from sphere i to
   sphere j. With ``smooth_joints`` these pairs are smooth joints (contact normal = joint normal, friction
   ``joint_friction_deg``); pairs cut by a fault (thickness > 0) are plain frictional contacts;
+  ``liggghts_joints`` ([spheres] liggghts_joints, LIGGGHTS decks only, which have no smooth joint): "contact"
+  (the joint pairs are plain contacts) or "open" (no contact between the two sides of a joint, adapters/liggghts.py);
 - the contact law of every unbonded contact: ``kn``, ``ks`` [N/m], ``friction_deg``, ``damping`` (ratio of
   critical, viscous), and the run: ``gravity``, ``dt`` (one step for every engine), ``duration``,
   ``record_every``, ``local_damping`` (Cundall's non-viscous damping, as YADE's NewtonIntegrator.damping),
@@ -45,6 +47,10 @@ OPTIONAL_ARRAYS = ("force", "prescribed", "velocity", "bond_zeta")
 
 # Scene keys that no deck carries, and why (every other [simulation] and [spheres] key of dda/scene.py reaches
 # every engine that can express it, or is named in that engine's extra["approximations"]; tests/test_scene_keys.py)
+# [spheres] liggghts_joints: how a LIGGGHTS deck (no smooth joint) writes the joint pairs (adapters/liggghts.py);
+# the values of dda.scene.LIGGGHTS_JOINTS (not imported here: dda.scene is slow to import)
+LIGGGHTS_JOINTS = ("contact", "open")
+
 NOT_RUN_KEYS = {
     "simulation.frames": "the number of VTU frames `dda run` writes (output, not physics)",
     "simulation.max_steps": "a limit checked when the deck is written (a longer run is refused), not physics",
@@ -52,6 +58,14 @@ NOT_RUN_KEYS = {
     "simulation.sleep_velocity": "see simulation.sleep", "simulation.sleep_accel": "see simulation.sleep",
     "simulation.sleep_steps": "see simulation.sleep",
 }
+
+
+def liggghts_only(run):
+    """The note of an engine with smooth joints when the run asks LIGGGHTS to drop the joint contacts."""
+    if run.liggghts_joints == "open":
+        return ['spheres.liggghts_joints = "open" concerns LIGGGHTS decks only: here the joint pairs are smooth '
+                "joints (spheres.smooth_joints)"]
+    return []
 
 
 class SpecError(ValueError):
@@ -100,6 +114,7 @@ class SphereRun:
     velocity: np.ndarray | None = None    # (n, 3) velocity of the prescribed spheres [m/s] (None: zeros)
     bond_zeta: np.ndarray | None = None   # (m,) viscous bond damping, ratio of critical (None: zeros)
     viscous_damping: float = 0.0          # c [N s/m]: a force -c v on every free sphere (LIGGGHTS fix viscous)
+    liggghts_joints: str = "contact"      # LIGGGHTS decks: joint pairs as plain contacts, or "open" (no contact)
 
     def __post_init__(self):
         n = len(np.asarray(self.radii).reshape(-1))
@@ -164,7 +179,7 @@ class SphereRun:
 
 
 HEADER = ("name", "density", "kn", "ks", "friction_deg", "damping", "joint_friction_deg", "smooth_joints", "dt",
-          "duration", "record_every", "local_damping", "source", "extra", "viscous_damping")
+          "duration", "record_every", "local_damping", "source", "extra", "viscous_damping", "liggghts_joints")
 
 
 def check_run(path, arrays):
@@ -187,7 +202,8 @@ def check_run(path, arrays):
           "smooth_joints": F.boolean("smooth_joints"), "dt": F.number("dt", positive=True),
           "duration": F.number("duration", positive=True), "record_every": F.number("record_every", positive=True),
           "local_damping": F.number("local_damping", lo=0, hi=1), "source": F.string("source", ""),
-          "extra": F.obj("extra", {}), "viscous_damping": F.number("viscous_damping", 0.0, nonneg=True)}
+          "extra": F.obj("extra", {}), "viscous_damping": F.number("viscous_damping", 0.0, nonneg=True),
+          "liggghts_joints": F.string("liggghts_joints", "contact", choices=LIGGGHTS_JOINTS)}
     c = kw["centers"] = A.real("centers", (None, 3))
     n = len(c)
     sph, one = f"the run has {n} spheres", "one per sphere of centers"
@@ -406,6 +422,11 @@ def from_scene(path, max_steps=None, duration=None, dt=None, limit_steps=True):
                          source=str(path), force=force, prescribed=prescribed, velocity=velocity)
     except SpecError as exc:
         raise SceneError(Path(path), "spheres.model", sp.get("path"), str(exc).split(": ", 1)[-1]) from None
+    run.liggghts_joints = sp.get("liggghts_joints", "contact")
+    from .liggghts import open_joint_problem
+
+    if open_joint_problem(run):
+        raise SceneError(Path(path), "spheres.liggghts_joints", "open", open_joint_problem(run))
     vd = getattr(scene, "viscous_damping", 0.0)
     if vd:
         try:
@@ -440,5 +461,6 @@ def check_steps(run, path, max_steps=None, scene=None, duration=None, dt=None):
                  safety=scene.safety, **kw)
 
 
-__all__ = ["NOT_RUN_KEYS", "SphereRun", "SpecError", "check_run", "check_steps", "damping_ratio", "first_mode",
-           "from_model", "from_scene", "held_spheres", "joint_pairs", "static_displacement", "viscous_coefficient"]
+__all__ = ["LIGGGHTS_JOINTS", "NOT_RUN_KEYS", "SphereRun", "SpecError", "check_run", "check_steps", "damping_ratio",
+           "first_mode", "from_model", "from_scene", "held_spheres", "joint_pairs", "liggghts_only",
+           "static_displacement", "viscous_coefficient"]

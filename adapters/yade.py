@@ -63,7 +63,7 @@ import numpy as np
 
 from .process import EngineError, describe_failure, find_engine, run_process, unbuffered
 from .result import COMPLETE, INCOMPLETE, RunResult
-from .spec import SpecError, SphereRun
+from .spec import SpecError, SphereRun, liggghts_only
 
 SCRIPT = Path(__file__).with_name("yade_script.py")
 POS_LIMIT = 5_000_000  # record positions when n * records <= POS_LIMIT
@@ -74,7 +74,7 @@ OUTPUTS = ("yade_setup.json", "yade_series.npz", "yade_snapshot.npz", "yade_pos.
 def approximations(run: SphereRun):
     """What this deck cannot represent exactly: strings naming the scene key they concern (RunResult.extra)."""
     out = ["bond shear failure is Mohr-Coulomb in JCFpm: |Fs| > bond_fs + Fn tan(friction), Fn < 0 in tension",
-           "bonds carry no bending or twisting moment"]
+           "bonds carry no bending or twisting moment"] + liggghts_only(run)
     zeta = np.asarray(run.bond_zeta, float)
     if np.any(zeta > 0):
         out.append(f"spheres.bond_damping = {float(zeta.max()):g} not represented: JCFpm bonds have no viscous "

@@ -33,7 +33,10 @@ written. Keys::
                    (Pa, default unbreakable), bond_damping, bond_radius_factor = 1;
                    fixed_below = [[dip, dip_direction, x, y, z], ...] (spheres below any of these planes are
                    fixed), smooth_joints = true (pairs the model cuts by a zero-thickness joint slide on the joint
-                   plane: contact normal = joint normal), joint_friction (deg, default [contact] friction);
+                   plane: contact normal = joint normal), joint_friction (deg, default [contact] friction),
+                   liggghts_joints = "contact" (LIGGGHTS decks only, which have no smooth joint: the joint pairs
+                   are plain contacts) or "open" (no contact between the two sides of a joint: exact while the
+                   joints stay open; see adapters/liggghts.py);
                    [[spheres.load]] tables load a region of spheres: region = "z>2.6" (or a list of such cuts,
                    all of which must hold) or below = [dip, dip_direction, x, y, z], and exactly one of
                    force = [fx, fy, fz] (a constant force on EACH sphere of the region, N; the forces of
@@ -72,6 +75,8 @@ TOP_KEYS |= {"report"}  # [[report]]: the answers the run states (dda/answers.py
 SPHERE_KEYS = {"model", "density", "fixed", "bond_young", "bond_kn", "bond_ks", "bond_shear_ratio", "bond_tensile",
                "bond_shear", "bond_damping", "bond_radius_factor", "joint_friction", "smooth_joints", "fixed_below"}
 SPHERE_KEYS |= {"load"}  # [[spheres.load]]: loaded regions (constant force or prescribed velocity)
+SPHERE_KEYS |= {"liggghts_joints"}  # LIGGGHTS decks only: joint pairs as plain contacts or without contact
+LIGGGHTS_JOINTS = ("contact", "open")
 SIMULATION_KEYS = {"duration", "dt", "safety", "gravity", "local_damping", "record_every", "frames", "sleep",
                    "sleep_velocity", "sleep_accel", "sleep_steps", "max_steps"}
 SIMULATION_KEYS |= {"viscous_damping"}  # sphere decks: -c v on every sphere (LIGGGHTS fix viscous; adapters/spec.py)
@@ -394,6 +399,9 @@ def _read_spheres(rd, data, path):
            "smooth_joints": rd.boolean(st, "smooth_joints", "spheres.smooth_joints", True)}
     if "joint_friction" in st:
         out["joint_friction"] = rd.number(st, "joint_friction", "spheres.joint_friction", lo=0.0, hi=89.9)
+    out["liggghts_joints"] = rd.choice(st, "liggghts_joints", "spheres.liggghts_joints", LIGGGHTS_JOINTS, "contact")
+    if out["liggghts_joints"] == "open" and not out["smooth_joints"]:
+        rd.err("spheres.liggghts_joints", "open", "stands in for smooth joints: needs spheres.smooth_joints = true")
     if "load" in st:
         c = np.asarray(model.centers, float).reshape(-1, 3)
         fixed = np.zeros(len(c), bool)

@@ -106,6 +106,9 @@ DDA_KEYS = {
     "spheres.bond_radius_factor": K("-", "bond radius as a factor of the smaller sphere radius"),
     "spheres.smooth_joints": K("", "pairs the model cuts by a zero-thickness joint slide on the joint plane"),
     "spheres.joint_friction": K("deg", "friction of the smooth joints", absent="[contact] friction"),
+    "spheres.liggghts_joints": K("", "LIGGGHTS decks only (no smooth joint there): \"contact\" = joint pairs are "
+                                     "plain contacts, \"open\" = no contact between green and blue spheres (exact "
+                                     "while the joints stay open; closing joints pass through)"),
     "spheres.load": K("", "[[spheres.load]]: loaded regions of spheres"),
     "spheres.load[].region": K("", "\"z>2.6\" or a list of such cuts, all of which must hold (or below)",
                                type="string or list of strings"),
@@ -267,6 +270,7 @@ def dda_scenes():
         "spheres": {"model": "beam.toml", "density": 2600.0, "fixed": ["x<0.1"], "bond_young": 1e9,
                     "bond_kn": 1e6, "bond_ks": 5e5, "bond_shear_ratio": 0.4, "bond_tensile": 1e6, "bond_shear": 1e6,
                     "bond_damping": 0.1, "bond_radius_factor": 1.0, "smooth_joints": True, "joint_friction": 20.0,
+                    "liggghts_joints": "open",
                     "fixed_below": [[0, 0, 0, 0, -1]],
                     "load": [{"region": ["x>0.1", "x<0.4"], "force": [0, 0, -1.0]},
                              {"below": [90, 270, 0.6, 0, 0], "velocity": [0, 0, -0.1]}]},

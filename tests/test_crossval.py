@@ -126,3 +126,41 @@ def test_beam_damped_from_its_scene_alone_settles_in_liggghts(tmp_path):
     for row in rows:
         assert row.ok, cv.table(rows)
         assert abs(row.err_value) <= 1e-3
+
+
+def test_beam_joint_open_in_liggghts_detaches_the_bond_graph_reference(tmp_path):
+    # LIGGGHTS-PUBLIC has no smooth joint; the beam's scene asks its decks to drop the contact across the joint
+    # ([spheres] liggghts_joints = "open"). The deck's exclusions, read back from its files (atom types from
+    # `data`, excluded type pairs from `in`), drop exactly the touching pairs the model cuts by the joint, and the
+    # real run detaches exactly the spheres that no bond path ties to the fixed end (the bond graph)
+    import re
+    from pathlib import Path
+
+    from scipy.spatial import cKDTree
+
+    if not (shutil.which("liggghts") or CI):
+        pytest.skip("LIGGGHTS is not installed")
+    require_engine("liggghts")
+    path = cv.CV / "beam_joint.toml"
+    run = from_scene(path)
+    assert run.liggghts_joints == "open" and len(run.joint_i)
+    res = cv.run_engine("liggghts", path, tmp_path, run=run)
+    deck = Path(tmp_path) / "liggghts"
+    data = (deck / "data").read_text().split("\nAtoms", 1)[1].split("\n\n", 2)[1]
+    rows = np.array([line.split()[:2] for line in data.strip().splitlines()], np.int64)
+    types = np.empty(run.n, np.int64)
+    types[rows[:, 0] - 1] = rows[:, 1]
+    excluded = {frozenset(map(int, m)) for m in re.findall(r"^neigh_modify exclude type (\d+) (\d+)$",
+                                                           (deck / "in").read_text(), re.M)}
+    assert excluded
+    pairs = cKDTree(run.centers).query_pairs(2.0 * float(run.radii.max()) * (1 + 1e-9), output_type="ndarray")
+    touch = np.linalg.norm(run.centers[pairs[:, 1]] - run.centers[pairs[:, 0]], axis=1) \
+        <= (run.radii[pairs[:, 0]] + run.radii[pairs[:, 1]]) * (1 + 1e-9)
+    dropped = {frozenset(p) for p in pairs[touch].tolist() if frozenset(types[p].tolist()) in excluded}
+    assert dropped == {frozenset(p) for p in zip(run.joint_i.tolist(), run.joint_j.tolist())}
+    ref = cv.detached_reference(run)
+    got = res.moved(0.5 * float(run.radii.min()))
+    assert np.array_equal(got, ref), f"{int(got.sum())} detached, bond graph {int(ref.sum())}"
+    # what the option does not represent is named, and the runner measures it
+    assert any("spheres.liggghts_joints" in a for a in res.extra["approximations"])
+    assert res.extra["joint_closure_max"] >= 0.0

@@ -36,6 +36,7 @@ VALUES = {
     "spheres.bond_radius_factor": 0.7, "spheres.joint_friction": 10.0, "spheres.smooth_joints": False,
     "spheres.fixed_below": [[0.0, 0.0, 0.0, 0.0, 0.02]],
     "spheres.load": [{"region": "x>0.1", "force": [0.0, 0.0, -1.0]}],
+    "spheres.liggghts_joints": "open",
 }
 BASE = {"simulation": {"duration": 0.002, "record_every": 0.001},
         "contact": {"kn": 1e6, "friction": 30.0},
@@ -167,6 +168,9 @@ def test_every_scene_key_reaches_every_deck_or_is_listed(models):
     assert table["spheres.bond_ks", "liggghts-bonds"] == "listed"
     assert all(table[k, w] == "carried" for k in ("spheres.load", "simulation.gravity", "spheres.density")
                for w in WRITERS)
+    # LIGGGHTS-only: the decks drop the contact across the joint, the engines with smooth joints say they ignore it
+    assert all(table["spheres.liggghts_joints", f"liggghts-{v}"] == "carried" for v in liggghts.VARIANTS)
+    assert table["spheres.liggghts_joints", "in-house"] == table["spheres.liggghts_joints", "yade"] == "listed"
 
 
 def test_liggghts_notes_are_those_of_the_variant(models):
@@ -284,3 +288,51 @@ def test_critical_damping_without_a_first_mode_is_one_line(models, tmp_path, cap
     tables["simulation"]["viscous_damping"] = "sometimes"
     with pytest.raises(SceneError, match="viscous_damping"):
         load_scene(write_scene(models / "bad.toml", tables))
+
+
+def test_liggghts_joints_open_is_refused_where_the_type_exclusion_is_not_the_joint_pairs(tmp_path, capsys):
+    # the wedge's model uses the geometric bond rule: some joint pairs join spheres of one colour and some touching
+    # green-blue pairs are no joint pairs, so dropping green-blue contacts is not "the joint pairs open": refused,
+    # one line naming the file, the key and the value (and for the CLI option); bad values likewise; nothing written
+    import shutil
+
+    from adapters.cli import main
+    from cases.crossval import CV
+
+    shutil.copy(CV / "wedge_model.toml", tmp_path)
+    text = (CV / "wedge.toml").read_text()
+    run = from_scene(CV / "wedge.toml")
+    c = run.colour
+    gb = ((c[run.joint_i] == 2) & (c[run.joint_j] == 3)) | ((c[run.joint_i] == 3) & (c[run.joint_j] == 2))
+    assert not gb.all()  # the premise: joint pairs of one colour
+    beam = (CV / "beam_joint.toml").read_text()
+    key_line = re.compile(r'^liggghts_joints = "open"$', re.M)
+    shutil.copy(CV / "beam_joint_model.toml", tmp_path)
+    cases = [(text.replace("[spheres]", '[spheres]\nliggghts_joints = "open"'), [], "spheres.liggghts_joints",
+              "open"),
+             (text, ["--liggghts-joints", "open"], "--liggghts-joints", "open"),
+             (key_line.sub('liggghts_joints = "shut"', beam), [], "spheres.liggghts_joints", "shut"),
+             (key_line.sub('liggghts_joints = "open"\nsmooth_joints = false', beam), [], "spheres.liggghts_joints",
+              "smooth_joints"),
+             (beam, ["--liggghts-joints", "ajar"], "--liggghts-joints", "ajar")]
+    assert key_line.search(beam)
+    for k, (scene, opts, key, value) in enumerate(cases):
+        src = tmp_path / f"s{k}.toml"
+        src.write_text(scene)
+        out = tmp_path / f"out{k}"
+        capsys.readouterr()
+        assert main(["export", str(src), "--to", "liggghts", "-o", str(out), *opts]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1, err
+        assert str(src) in err[0] and key in err[0] and value in err[0], err[0]
+        assert not out.exists()
+    assert main(["export", str(tmp_path / "s4.toml"), "--to", "yade", "-o", str(tmp_path / "y"),
+                 "--liggghts-joints", "open"]) == 2
+    assert not (tmp_path / "y").exists()
+
+
+def test_liggghts_joints_values_agree_with_the_scene_reader():
+    from adapters.spec import LIGGGHTS_JOINTS
+    from dda.scene import LIGGGHTS_JOINTS as SCENE
+
+    assert LIGGGHTS_JOINTS == SCENE
