@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .scene import _list_of_tables, read_region_cuts, region_mask  # (the scene reader calls read_reports)
+
 # quantity -> (unit, what it is, where it applies: "block" needs a named block, "any" a block or sphere run,
 # "spheres" a sphere run)
 QUANTITIES = {
@@ -57,8 +59,6 @@ class Report:
 def read_reports(rd, data, block_names, spheres):
     """The [[report]] tables of a scene (SceneError on a bad one); `block_names` the scene's blocks,
     `spheres` whether the scene has [spheres]."""
-    from .scene import _list_of_tables, read_region_cuts  # (dda/scene.py calls this function)
-
     out = []
     tabs = _list_of_tables(rd, data, "report")
     for k, t in enumerate(tabs):
@@ -141,13 +141,6 @@ def _rotation_deg(q0, q1):
     return math.degrees(2.0 * math.acos(min(1.0, d)))
 
 
-def _in_region(x, cuts):
-    keep = np.ones(len(x), bool)
-    for axis, sign, value in cuts:
-        keep &= (x[:, axis] - value) * sign > 0
-    return keep
-
-
 class Answers:
     """Takes the initial state of a simulation when made, the final one in `finish`."""
 
@@ -184,7 +177,7 @@ class Answers:
     def _sphere_moves(self, sim, region):
         free = ~(sim.spheres.fixed | sim.spheres.prescribed)
         if region is not None:
-            free &= _in_region(self.x0, region)
+            free &= region_mask(self.x0, region)
         return np.linalg.norm(sim.x[free] - self.x0[free], axis=1)
 
     def value(self, r, sim, energy_error):
@@ -194,7 +187,7 @@ class Answers:
             return float(energy_error)
         if q in ("displacement", "velocity"):
             if r.region is not None:
-                sel = _in_region(self.x0, r.region)
+                sel = region_mask(self.x0, r.region)
                 vec = (sim.x[sel] - self.x0[sel] if q == "displacement" else sim.v[sel]).mean(axis=0)
             else:
                 i = self._index(r.block)

@@ -25,14 +25,12 @@ def cmd_run(args):
 
     r = run(args.scene, Path(args.output), force=args.force, progress=_progress(args.quiet),
             max_steps=positive_int(args.max_steps, "--max-steps"))
-    if r.status != "ok":
-        print(f"dda: error: {r.summary['message']} (last good state written to {args.output})", file=sys.stderr)
-        if args.json:
-            print(json.dumps(r.summary, indent=2))
-        return EXIT_BLOWUP
     if args.json:
         print(json.dumps(r.summary, indent=2))
-    elif not args.quiet:
+    if r.status != "ok":
+        print(f"dda: error: {r.summary['message']} (last good state written to {args.output})", file=sys.stderr)
+        return EXIT_BLOWUP
+    if not args.json and not args.quiet:
         print(f"{args.output}: {r.headline}")
         for a in r.answers:
             print(f"  {format_answer(a)}")

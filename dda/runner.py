@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,12 +47,9 @@ class RunOutcome:
 
 
 class _Nowhere:
-    """The output folder of a run that writes nothing: a throwaway folder for the pieces that need one."""
+    """The output folder of a run that writes nothing: with no formats nothing is written into it (None)."""
 
-    @contextlib.contextmanager
-    def assemble(self):
-        with tempfile.TemporaryDirectory(prefix="dda-run-") as tmp:
-            yield Path(tmp)
+    assemble = staticmethod(contextlib.nullcontext)
 
 
 def _write_outputs(scene, sim, res, tmp, frames, summary, say, out):
@@ -150,7 +146,7 @@ def _sphere_meshes(sim, colour):
     return spheres, blocks
 
 
-def _run_spheres(scene, out, dest, max_steps, say, t0):
+def _run_spheres(scene, out, dest, formats, max_steps, say, t0):
     """`dda run` of a scene with [spheres]: series.npz (positions, energies, intact bonds per record, the final
     bond state; block_pos / block_quat per record when blocks move), series.csv, a VTU frame series
     (frames/spheres_*.vtu: points with radius, fixed, velocity, displacement, colour; frames/blocks_*.vtu, or one
@@ -166,7 +162,6 @@ def _run_spheres(scene, out, dest, max_steps, say, t0):
         say(f"scene      {scene.name}: {ss.n} spheres ({int(ss.fixed.sum())} fixed), {ss.n_bonds} bonds, "
             f"{ss.n_joints} smooth joints, {len(scene.blocks)} blocks ({_n_moving(scene)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s)")
-    formats = scene.formats if out is not None else ()
     with dest.assemble() as tmp:
         want_vtu = "vtu" in formats
         entries = []
@@ -258,14 +253,14 @@ def run(scene, out=None, force=False, progress=None, max_steps=None) -> RunOutco
         dest = output_folder(out, "dda run", force=force, say=say)  # refused before the run
     else:
         dest = _Nowhere()
+    formats = scene.formats if out is not None else ()  # a run in memory writes nothing
     if scene.spheres:
-        return _run_spheres(scene, out, dest, max_steps, say, t0)
+        return _run_spheres(scene, out, dest, formats, max_steps, say, t0)
     bs, sim = scene.build(max_steps=max_steps)  # step limit: SceneError
     if say:
         say(f"scene      {scene.name}: {bs.n_blocks} blocks ({len(sim.active)} moving), dt = {sim.dt:.3g} s "
             f"(critical {sim.dt_crit:.3g} s), {int(round(scene.duration / sim.dt))} steps")
     answers = Answers(scene.reports or default_reports(False), sim)  # the initial state the answers start from
-    formats = scene.formats if out is not None else ()
     with dest.assemble() as tmp:
         frames = []
         want_vtu = "vtu" in formats

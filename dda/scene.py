@@ -174,14 +174,7 @@ class DDAScene:
     def fixed_spheres(self, centers):
         """The [spheres] fixed flags of spheres at `centers`: inside a fixed region ("z>2.6") or below a
         fixed_below plane (dip, dip direction, a point of the plane)."""
-        sp = self.spheres
-        c = np.asarray(centers, float)
-        fixed = np.zeros(len(c), bool)
-        for axis, sign, value in sp["fixed"]:
-            fixed |= sign * (c[:, axis] - value) > 0
-        for normal, point in sp.get("fixed_below", ()):
-            fixed |= matmul(c - point, normal) < 0
-        return fixed
+        return fixed_mask(centers, self.spheres["fixed"], self.spheres.get("fixed_below", ()))
 
     def sphere_loads(self, centers):
         """(force (n, 3) [N], prescribed (n,) bool, velocity (n, 3) [m/s]) of the [[spheres.load]] tables for
@@ -235,17 +228,40 @@ class SphereLoadError(ValueError):
         self.key, self.value = key, value
 
 
+def _cut_mask(c, cut):
+    """Spheres at `c` on the kept side of one parsed cut ("z>2.6": (axis, sign, value))."""
+    axis, sign, value = cut
+    return sign * (c[:, axis] - value) > 0
+
+
+def region_mask(centers, cuts):
+    """Mask of the spheres at `centers` inside a sphere region: every cut of `cuts` holds."""
+    c = np.asarray(centers, float).reshape(-1, 3)
+    mask = np.ones(len(c), bool)
+    for cut in cuts:
+        mask &= _cut_mask(c, cut)
+    return mask
+
+
+def fixed_mask(centers, cuts, below):
+    """[spheres] fixed flags of the spheres at `centers`: inside any fixed cut ("z>2.6") or below any
+    fixed_below plane ((normal, point) pairs)."""
+    c = np.asarray(centers, float).reshape(-1, 3)
+    fixed = np.zeros(len(c), bool)
+    for cut in cuts:
+        fixed |= _cut_mask(c, cut)
+    for normal, point in below:
+        fixed |= matmul(c - point, normal) < 0
+    return fixed
+
+
 def load_region(load, centers):
     """Mask of the spheres at `centers` inside the region of one parsed [[spheres.load]] table."""
-    c = np.asarray(centers, float).reshape(-1, 3)
     kind, spec = load["region"]
     if kind == "below":
         normal, point = spec
-        return matmul(c - point, normal) < 0
-    mask = np.ones(len(c), bool)
-    for axis, sign, value in spec:
-        mask &= sign * (c[:, axis] - value) > 0
-    return mask
+        return matmul(np.asarray(centers, float).reshape(-1, 3) - point, normal) < 0
+    return region_mask(centers, spec)
 
 
 def sphere_load_arrays(loads, centers, fixed):
@@ -404,12 +420,7 @@ def _read_spheres(rd, data, path):
         rd.err("spheres.liggghts_joints", "open", "stands in for smooth joints: needs spheres.smooth_joints = true")
     if "load" in st:
         c = np.asarray(model.centers, float).reshape(-1, 3)
-        fixed = np.zeros(len(c), bool)
-        for axis, sign, value in regions:
-            fixed |= sign * (c[:, axis] - value) > 0
-        for normal, point in below:
-            fixed |= matmul(c - point, normal) < 0
-        out["loads"] = _read_sphere_loads(rd, st["load"], c, fixed)
+        out["loads"] = _read_sphere_loads(rd, st["load"], c, fixed_mask(c, regions, below))
     return out
 
 
