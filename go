@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set-up-and-go for a fresh Debian machine (idempotent; fast when set-up is done).
-#   ./go run   [SCENE] [OUTDIR]   build the sphere model of SCENE (default: cases/open_pit.toml); a run
+#   ./go run   [SCENE] [OUTDIR]   build the sphere model of SCENE (default: cases/scenes/open_pit.toml); a run
 #                                 again replaces its earlier model there (sgim build --force: files added
 #                                 by hand stay, a folder of other files is refused)
 #   ./go test  [PYTEST ARGS]      run the test suite
@@ -113,7 +113,7 @@ shift || true
 case "$cmd" in
   run)
     setup
-    scene="${1:-cases/open_pit.toml}"
+    scene="${1:-cases/scenes/open_pit.toml}"
     out="${2:-out/$(basename "${scene%.toml}")}"
     exec .venv/bin/sgim build "$scene" -o "$out" --force
     ;;

@@ -12,7 +12,7 @@
 The Python API (docs/api.md)::
 
     import adapters
-    info = adapters.export("cases/crossval/column.toml", "yade", "deck")   # deck.json as a dict
+    info = adapters.export("cases/scenes/crossval/column.toml", "yade", "deck")  # deck.json as a dict
     res = adapters.run("deck")                   # a RunResult (time, positions, bonds intact, ...), saved in deck/result
     res = adapters.run_inhouse(adapters.SphereRun.load("deck/run.npz"))   # the same run, in-house
     same = adapters.load_result("deck/result")

@@ -32,11 +32,11 @@ deformable blocks (dof 12) run rigid; per-material-pair laws are not carried ove
 (Debian): the volumetric law keeps the shear force on the law object, not per contact, so with several
 contacts each one starts from the previous contact's shear force; single-contact runs (a block on an incline)
 are right, multi-contact runs (the wedge: two or three contacts) are unreliable, especially static ones.
-Measured on cases/dda_incline.toml (one contact): slide after 1 s 0.907031 m against 0.906410 m analytical
-(+0.07 %). On cases/dda_wedge.toml (friction 18 degrees, close to the critical 19.7, sliding on both joints):
+Measured on cases/scenes/dda_incline.toml (one contact): slide after 1 s 0.907031 m against 0.906410 m analytical
+(+0.07 %). On cases/scenes/dda_wedge.toml (friction 18 degrees, close to the critical 19.7, sliding on both joints):
 0.3268 m along the line of intersection after 1 s against 0.2023 m analytical (+62 %), and +316 % with a ten
 times stiffer material: the error follows the shared shear force, not the stiffness mapping. Far from the
-limit (cases/crossval/block_wedge.toml, friction 10 degrees) the same wedge slides 1.1173 m against 1.1056 m
+limit (cases/scenes/crossval/block_wedge.toml, friction 10 degrees) the same wedge slides 1.1173 m against 1.1056 m
 (+1.05 %): there the friction forces are a small part of the motion.
 """
 from __future__ import annotations

@@ -1,13 +1,13 @@
-"""Command line: ``cases crossval [...]`` (the cross-validation table, cases/crossval.py), ``cases study [...]``
-(batch studies, cases/study.py)."""
+"""Command line: ``cases crossval [...]`` (the cross-validation table, cases/lib/crossval.py), ``cases study [...]``
+(batch studies, cases/lib/study.py)."""
 from __future__ import annotations
 
 import sys
 
 # command -> (module with main(argv), one line of help)
 COMMANDS = {
-    "crossval": ("cases.crossval", "the cross-validation table: every case in every engine against its reference"),
-    "study": ("cases.study", "batch studies (parameter sweeps, Monte Carlo), serial or under mpirun"),
+    "crossval": ("cases.lib.crossval", "the cross-validation table: every case in every engine against its reference"),
+    "study": ("cases.lib.study", "batch studies (parameter sweeps, Monte Carlo), serial or under mpirun"),
 }
 
 

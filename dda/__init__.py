@@ -3,9 +3,9 @@
 The Python API (docs/api.md)::
 
     import dda
-    r = dda.run("cases/dda_incline.toml")            # nothing written; dda.run(scene, out="folder") writes
+    r = dda.run("cases/scenes/dda_incline.toml")     # nothing written; dda.run(scene, out="folder") writes
     r.answers, r.summary, r.results, r.simulation    # what `dda run` prints and writes
-    scene = dda.load_scene("cases/dda_incline.toml")
+    scene = dda.load_scene("cases/scenes/dda_incline.toml")
     bs, sim = scene.build()                          # a BlockSystem and its Simulation, to step by hand
     sim.run(0.5)
 

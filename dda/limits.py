@@ -2,7 +2,7 @@
 
 The limit: ``--max-steps N`` on the command (``dda run``, ``dda wedge``, ``adapters export``), else the scene's
 ``[simulation] max_steps`` (or ``[limits] max_steps``: the same key in the table sgim scenes use), else
-``DEFAULT_MAX_STEPS`` = 1e8. The scenes of cases/ need at most 3.6e5 steps (cases/dda_toppling.toml; the
+``DEFAULT_MAX_STEPS`` = 1e8. The scenes of cases/ need at most 3.6e5 steps (cases/scenes/dda_toppling.toml; the
 crossval and study scenes 2e3 - 2e4), and 1e8 steps of one block take about a day at the engine's speed.
 
 The refusal is one SceneError line naming what caused the count, the dt and the numbers:

@@ -4,18 +4,21 @@ Packs spheres in a domain, excavates them with triangulated surfaces, cuts them 
 and membership) and builds the bond list. The Python API (docs/api.md)::
 
     import sgim
-    model = sgim.build("cases/open_pit.toml")   # a SphereModel: centers, radii, colour, bonds, bonded, ...
+    model = sgim.build("cases/scenes/open_pit.toml")  # a SphereModel: centers, radii, colour, bonds, bonded, ...
     model.save("model.npz")
     same = sgim.load("model.npz")
-    scene = sgim.load_scene("cases/open_pit.toml")  # the validated Scene (SceneError on bad input)
+    scene = sgim.load_scene("cases/scenes/open_pit.toml")  # the validated Scene (SceneError on bad input)
 
-The functions import the package's modules when first called: ``import sgim`` stays light.
+The functions import the package's modules when first called: ``import sgim`` stays light. What every package
+of the project shares (SceneError, CliError, the command-line conventions, atomic writers) is sgim/common.py; the
+validating reader of every scene-like TOML file is sgim/reader.py.
 """
 from .kernel_cache import configure as _configure_kernel_cache
 
 _configure_kernel_cache()  # before any kernel module is imported (sgim/kernel_cache.py)
 
-__version__ = "0.1.0"
+from .common import SceneError, __version__  # noqa: E402  (standard library only: `import sgim` stays light)
+
 __all__ = ["build", "load", "load_scene", "SceneError"]
 
 
@@ -49,10 +52,3 @@ def load(path):
 
     return SphereModel.load(path)
 
-
-def __getattr__(name):  # SceneError without importing the scene reader at `import sgim`
-    if name == "SceneError":
-        from .scene import SceneError
-
-        return SceneError
-    raise AttributeError(f"module 'sgim' has no attribute {name!r}")

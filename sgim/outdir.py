@@ -1,7 +1,7 @@
 """Output folders that never lose a user's file.
 
 Every command that writes a folder (``sgim build``, ``sgim dfn``, ``dda run``, ``adapters export``; ``cases study
-run`` keeps its own restartable layout, see cases/_batch.py) goes through :class:`OutputFolder`:
+run`` keeps its own restartable layout, see cases/lib/_batch.py) goes through :class:`OutputFolder`:
 
 * A command writes only into a folder it creates, an empty folder, or a folder holding the marker file
   ``.rockdem-output`` of the same command (JSON: tool, command, time and the list of files it wrote). A

@@ -7,7 +7,7 @@ then stops at that key.  What the reader cannot say (the unit of a key it reads 
 meaning for every key) is the hand-written :data:`SGIM_KEYS`; :func:`render_tables` merges the two.
 
 The synthetic scenes (:func:`sgim_scenes`) reach every table and key the reader allows, including those no case
-scene uses.  dda/scenedoc.py does the same for DDA scenes; cases/make_scene_docs.py writes docs/scenes.md.
+scene uses.  dda/scenedoc.py does the same for DDA scenes; cases/make/scene_docs.py writes docs/scenes.md.
 Nothing here changes how a scene is read.
 """
 from __future__ import annotations

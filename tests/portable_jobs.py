@@ -144,9 +144,9 @@ def job_sgim(work: Path):
 
 
 def _dda_run(work: Path, name: str, duration: float):
-    """`dda run` of cases/NAME.toml cut to `duration` with npz output only: hashes of its npz files (the wall
+    """`dda run` of cases/scenes/NAME.toml cut to `duration` with npz output only: hashes of its npz files (the wall
     time left out)."""
-    src = (HERE.parent / "cases" / f"{name}.toml").read_text()
+    src = (HERE.parent / "cases" / "scenes" / f"{name}.toml").read_text()
     lines = []
     for line in src.splitlines():
         key = line.split("=")[0].strip()
@@ -156,8 +156,8 @@ def _dda_run(work: Path, name: str, duration: float):
             line = "frames = 1"
         elif key == "formats":
             line = 'formats = ["npz"]'
-        elif key == "model":  # the sphere model lies beside the scene in cases/
-            line = f"model = {str(HERE.parent / 'cases' / line.split('=')[1].strip().strip(chr(34)))!r}"
+        elif key == "model":  # the sphere model lies beside the scene in cases/scenes/
+            line = f"model = {str(HERE.parent / 'cases' / 'scenes' / line.split('=')[1].strip().strip(chr(34)))!r}"
         lines.append(line)
     scene = work / f"{name}.toml"
     scene.write_text("\n".join(lines) + "\n")

@@ -22,8 +22,8 @@ from sgim.builder import build_model
 from sgim.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-HANG = ROOT / "cases" / "crossval" / "hang_joint.toml"
-MODEL = ROOT / "cases" / "crossval" / "hang_joint_model.toml"
+HANG = ROOT / "cases" / "scenes" / "crossval" / "hang_joint.toml"
+MODEL = ROOT / "cases" / "scenes" / "crossval" / "hang_joint_model.toml"
 
 
 def cli(*args, env=None):
@@ -76,7 +76,7 @@ def test_export_and_run_each_engine(tmp_path, engine):
     # 0.01 s of gravity: the fixed top does not move; the spheres that no bond ties to it (bond graph) fall
     # 1/2 g t^2 (times 0.8 where Cundall's local damping 0.2 acts: YADE), the others hold
     from adapters.spec import SphereRun
-    from cases.crossval import detached_reference
+    from cases.lib.crossval import detached_reference
 
     run = SphereRun.load(deck / "run.npz")
     loose = detached_reference(run)
@@ -104,7 +104,7 @@ def test_bad_input_one_line_and_nothing_left(tmp_path):
     cases = [
         (("export", empty, "--to", "yade", "-o", tmp_path / "a"), "the model has no spheres"),
         (("export", HANG, "--to", "abaqus", "-o", tmp_path / "b"), "unknown target 'abaqus'"),
-        (("export", ROOT / "cases" / "dda_incline.toml", "--to", "liggghts", "-o", tmp_path / "c"),
+        (("export", ROOT / "cases" / "scenes" / "dda_incline.toml", "--to", "liggghts", "-o", tmp_path / "c"),
          "exports to yade (Polyhedra) only"),
         (("export", tmp_path / "nope.npz", "--to", "yade", "-o", tmp_path / "d"), "no such file"),
         (("export", HANG, "--to", "yade", "-o", tmp_path / "e", "--duration", "-1"), "--duration must be > 0"),

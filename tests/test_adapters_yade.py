@@ -221,13 +221,13 @@ def test_missing_engine(tmp_path, monkeypatch):
 
 # -- polyhedra ------------------------------------------------------------------------------------------------
 def test_polyhedra_incline_slides_as_analytical(tmp_path):
-    """cases/dda_incline.toml in YADE Polyhedra: the block slides 1/2 g (sin a - tan phi cos a) t^2 down the
+    """cases/scenes/dda_incline.toml in YADE Polyhedra: the block slides 1/2 g (sin a - tan phi cos a) t^2 down the
     slope (a = 30, phi = 20 degrees), within 1 %."""
     from pathlib import Path
 
     from adapters.yade_poly import run_polyhedra_deck, write_polyhedra_deck
 
-    scene = Path(__file__).resolve().parents[1] / "cases" / "dda_incline.toml"
+    scene = Path(__file__).resolve().parents[1] / "cases" / "scenes" / "dda_incline.toml"
     T = 0.3
     info = write_polyhedra_deck(scene, tmp_path / "deck", duration=T, record_every=0.05)
     res = run_polyhedra_deck(tmp_path / "deck", tmp_path / "out")

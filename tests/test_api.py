@@ -1,5 +1,5 @@
 """The Python API of the package tops (docs/api.md): the names exist, carry docstrings and do what the command
-line does. cases/example_api.py, the notebook-style walk, runs in tests/test_readme_walk.py with the README's
+line does. cases/make/example_api.py, the notebook-style walk, runs in tests/test_readme_walk.py with the README's
 other lines, which checks its numbers against their references."""
 import json
 from pathlib import Path
@@ -32,7 +32,7 @@ def test_the_api_builds_the_model_the_command_line_builds(tmp_path):
     import sgim
     from sgim.cli import main
 
-    scene = ROOT / "cases" / "crossval" / "column_model.toml"
+    scene = ROOT / "cases" / "scenes" / "crossval" / "column_model.toml"
     assert main(["build", str(scene), "-o", str(tmp_path / "cli"), "--formats", "npz", "--quiet"]) == 0
     cli = sgim.load(tmp_path / "cli" / "model.npz")
     api = sgim.build(scene)
@@ -46,7 +46,7 @@ def test_dda_run_in_memory_writes_nothing_and_matches_the_folder_run(tmp_path, m
     import dda
 
     monkeypatch.chdir(tmp_path)
-    scene = ROOT / "cases" / "dda_deformable_column.toml"
+    scene = ROOT / "cases" / "scenes" / "dda_deformable_column.toml"
     mem = dda.run(scene)
     assert list(tmp_path.iterdir()) == []
     disk = dda.run(scene, out=tmp_path / "run")

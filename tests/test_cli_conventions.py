@@ -11,8 +11,8 @@ import sys
 
 import pytest
 
-TOOLS = {"sgim": "sgim.cli", "dda": "dda.cli", "adapters": "adapters.cli", "cases crossval": "cases.crossval",
-         "cases study": "cases.study"}
+TOOLS = {"sgim": "sgim.cli", "dda": "dda.cli", "adapters": "adapters.cli", "cases crossval": "cases.lib.crossval",
+         "cases study": "cases.lib.study"}
 
 
 class _Caught(Exception):

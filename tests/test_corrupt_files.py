@@ -25,16 +25,16 @@ import pytest
 
 from adapters.cli import main as adapters_main
 from adapters.result import RunResult
-from cases.report import main as report_main
-from cases.study import main as study_main
+from cases.lib.report import main as report_main
+from cases.lib.study import main as study_main
 from dda.cli import main as dda_main
 from sgim.cli import CliError, run_command
 from sgim.cli import main as sgim_main
 
 ROOT = Path(__file__).resolve().parents[1]
-HANG = ROOT / "cases" / "crossval" / "hang_joint.toml"
-HANG_MODEL = ROOT / "cases" / "crossval" / "hang_joint_model.toml"
-INCLINE = ROOT / "cases" / "dda_incline.toml"
+HANG = ROOT / "cases" / "scenes" / "crossval" / "hang_joint.toml"
+HANG_MODEL = ROOT / "cases" / "scenes" / "crossval" / "hang_joint_model.toml"
+INCLINE = ROOT / "cases" / "scenes" / "dda_incline.toml"
 
 RANDOM = np.random.default_rng(20240611).bytes(3000)
 PNG = b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + RANDOM[:300]

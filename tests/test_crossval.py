@@ -1,6 +1,6 @@
 """Cross-validation in CI: the hanging jointed block and the elastic column in all three engines.
 
-The references (cases/crossval.py) are checked first against simpler independent ones: a breadth-first search
+The references (cases/lib/crossval.py) are checked first against simpler independent ones: a breadth-first search
 for the detached set, and the closed-form sag of a sphere hung by three springs. Then every engine must
 give exactly the reference's detached set and the column's static elongation within 5 % (the engines run for
 real: with CI=true a missing YADE or LIGGGHTS fails the test).
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from adapters.spec import from_scene
-from cases import crossval as cv
+from cases.lib import crossval as cv
 from engine_runs import CI, require_engine
 
 

@@ -16,7 +16,7 @@ import pytest
 from dda.cli import main
 
 HERE = Path(__file__).resolve().parent
-CASES = HERE.parent / "cases"
+CASES = HERE.parent / "cases" / "scenes"
 
 from test_dda_cli import SCENE, SPHERE_SCENE, _layer_model, _write  # noqa: E402 - the scenes of the run contract
 

@@ -1,4 +1,4 @@
-"""Study evaluators (cases/evaluators.py) against independent references: the Hoek & Bray paper case, a
+"""Study evaluators (cases/lib/evaluators.py) against independent references: the Hoek & Bray paper case, a
 brute-force breadth-first search of the bond graph, and the analytical sliding block."""
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cases.evaluators import EVALUATORS, detached_clusters, orientation
+from cases.lib.evaluators import EVALUATORS, detached_clusters, orientation
 from sgim.geometry import dip_to_normal
 
-STUDY_SCENES = Path(__file__).resolve().parents[1] / "cases" / "studies" / "scenes"
+STUDY_SCENES = Path(__file__).resolve().parents[1] / "cases" / "scenes" / "studies" / "scenes"
 G = 9.81
 
 
@@ -241,7 +241,7 @@ def test_dda_spheres_hanging_block_against_bond_graph(tmp_path):
     # the bonded block hangs from its fixed top layer; the part below the joint has no bond path to it and falls
     from adapters.spec import from_scene
 
-    scene = Path(__file__).resolve().parents[1] / "cases" / "crossval" / "hang_joint.toml"
+    scene = Path(__file__).resolve().parents[1] / "cases" / "scenes" / "crossval" / "hang_joint.toml"
     r = EVALUATORS["dda-spheres"].fn(scene, tmp_path, {})
     assert set(r) == set(EVALUATORS["dda-spheres"].results)
     run = from_scene(scene)

@@ -1,6 +1,6 @@
 """Seeded fuzz test of the command-line contract on bad and hostile input.
 
-Every scene in cases/ (cases/*.toml, cases/crossval/*.toml, cases/studies/*.toml, cases/studies/scenes/*.toml)
+Every scene in cases/ (cases/scenes/*.toml, cases/scenes/crossval/*.toml, cases/scenes/studies/*.toml, cases/scenes/studies/scenes/*.toml)
 is parsed, and each of its numeric keys (the numeric leaves of the TOML, one key per path with list indices
 folded, a random instance of it per value) gets NaN, inf, -inf, 0, a negative value, 1e308 and 1e-300; each
 scene also gets strings for numbers, tables for lists, lists of the wrong length, deleted required keys, unknown
@@ -68,7 +68,7 @@ TIMEOUT = float(os.environ.get("FUZZ_TIMEOUT", "30"))
 RUN_VALID = int(os.environ.get("FUZZ_RUN_VALID", "40"))
 N_SUBPROCESS = int(os.environ.get("FUZZ_SUBPROCESS", "10"))
 JOBS = 2
-SCENE_GLOBS = ("cases/*.toml", "cases/crossval/*.toml", "cases/studies/*.toml", "cases/studies/scenes/*.toml")
+SCENE_GLOBS = ("cases/scenes/*.toml", "cases/scenes/crossval/*.toml", "cases/scenes/studies/*.toml", "cases/scenes/studies/scenes/*.toml")
 
 PROG = {"sgim build": "sgim", "sgim dfn": "sgim", "dda run": "dda", "dda wedge": "dda wedge",
         "adapters export": "adapters", "adapters run": "adapters", "cases study run": "cases study"}
@@ -175,7 +175,7 @@ def _absolutise(node, base):
 
 
 def _dump(doc):
-    from cases.study import dump_toml
+    from cases.lib.study import dump_toml
 
     return dump_toml(doc)
 
@@ -626,7 +626,7 @@ class Generator:
             self.add("sgim build", ["{d}/scene.toml", "-o", "{d}/out", "--quiet", "--formats", "npz"], F,
                      f"absurd size: a {L:g} m cube, {kind} packing at r = {r:g}", files={"scene.toml": text},
                      reader=("sgim", "scene.toml"), owner="resource limits")
-        incline = tomllib.loads((REPO / "cases/dda_incline.toml").read_text())
+        incline = tomllib.loads((REPO / "cases/scenes/dda_incline.toml").read_text())
         incline["output"] = {"formats": ["npz"]}
         for key, val in (("simulation.duration", 1e9), ("contact.kn", 1e30), ("material.0.density", 1e-30)):
             doc = copy.deepcopy(incline)
@@ -635,15 +635,15 @@ class Generator:
             if key == "simulation.duration":
                 doc["simulation"]["record_every"] = 1.0
             self.add("dda run", ["{d}/scene.toml", "-o", "{d}/out", "--quiet"], F,
-                     f"absurd run: cases/dda_incline.toml with {key} = {val:g}", files={"scene.toml": _dump(doc)},
+                     f"absurd run: cases/scenes/dda_incline.toml with {key} = {val:g}", files={"scene.toml": _dump(doc)},
                      reader=("dda", "scene.toml"), owner="resource limits")
-        hang = tomllib.loads((REPO / "cases/crossval/hang_intact.toml").read_text())
-        _absolutise(hang, REPO / "cases/crossval")
+        hang = tomllib.loads((REPO / "cases/scenes/crossval/hang_intact.toml").read_text())
+        _absolutise(hang, REPO / "cases/scenes/crossval")
         hang["simulation"]["duration"] = 1e9
         hang["simulation"]["record_every"] = 1.0
         hang["output"] = {"formats": ["npz"]}
         self.add("dda run", ["{d}/scene.toml", "-o", "{d}/out", "--quiet"], F,
-                 "absurd run: cases/crossval/hang_intact.toml with simulation.duration = 1e9",
+                 "absurd run: cases/scenes/crossval/hang_intact.toml with simulation.duration = 1e9",
                  files={"scene.toml": _dump(hang)}, reader=("dda", "scene.toml"), owner="resource limits")
         # studies with an absurd number of cases
         base = "[work]\nseconds = 0.0\n[x]\na = 1.0\nb = 2\nc = 3.0\n"
@@ -708,11 +708,11 @@ class Generator:
 
     def other(self):
         # sgim dfn of scenes without a fracture network; adapters export to an unknown target
-        for rel in ("cases/crossval/hang_joint_model.toml", "cases/studies/scenes/excavation_plane.toml"):
+        for rel in ("cases/scenes/crossval/hang_joint_model.toml", "cases/scenes/studies/scenes/excavation_plane.toml"):
             doc = tomllib.loads((REPO / rel).read_text())
             self.add("sgim dfn", ["{d}/scene.toml", "-o", "{d}/out", "--quiet"], F, f"{rel}: no fracture network",
                      files={"scene.toml": _dump(doc)}, reader=("sgim", "scene.toml"), owner="sgim dfn")
-        self.add("adapters export", [str(REPO / "cases/crossval/hang_joint_model.toml"), "--to", "pfc", "-o",
+        self.add("adapters export", [str(REPO / "cases/scenes/crossval/hang_joint_model.toml"), "--to", "pfc", "-o",
                                      "{d}/out", "--quiet"], F, "adapters export --to pfc (unknown target)",
                  owner="adapters export options")
         for flag, v in (("--duration", "nan"), ("--duration", "-1"), ("--dt", "0"), ("--dt", "inf"),
@@ -921,7 +921,7 @@ def _reader_refuses(case, d):
 
                 load_scene(path)
             else:
-                from cases.study import load_study
+                from cases.lib.study import load_study
 
                 load_study(path)
     except Exception:  # noqa: BLE001 - a refusal, or a crash the command will show
@@ -1272,11 +1272,11 @@ def valid_files(tmp_path_factory):
     dda_runs = _dda_engines_cached()
     (root / "tiny.toml").write_text(HOST_MODEL)
     (root / "warm.toml").write_text(WARM_SCENE)
-    incline = tomllib.loads((REPO / "cases/dda_incline.toml").read_text())
+    incline = tomllib.loads((REPO / "cases/scenes/dda_incline.toml").read_text())
     _shrink_dda(incline, {})
     (root / "incline.toml").write_text(_dump(incline))
-    hang = tomllib.loads((REPO / "cases/crossval/hang_joint.toml").read_text())
-    _absolutise(hang, REPO / "cases/crossval")
+    hang = tomllib.loads((REPO / "cases/scenes/crossval/hang_joint.toml").read_text())
+    _absolutise(hang, REPO / "cases/scenes/crossval")
     _shrink_dda(hang, {})
     (root / "hang.toml").write_text(_dump(hang))
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()), \
@@ -1286,7 +1286,7 @@ def valid_files(tmp_path_factory):
         assert adapters_main(["export", str(root / "model/model.npz"), "--to", "liggghts", "-o", str(root / "deck"),
                               "--quiet", "--duration", "0.001"]) == 0
         assert sgim_main(["build", str(root / "warm.toml"), "-o", str(root / "warm"), "--quiet"]) == 0
-        assert sgim_main(["dfn", str(REPO / "cases/studies/scenes/open_pit_dfn_small.toml"), "-o",
+        assert sgim_main(["dfn", str(REPO / "cases/scenes/studies/scenes/open_pit_dfn_small.toml"), "-o",
                           str(root / "dfn"), "--quiet"]) == 0
         if dda_runs:
             assert dda_main(["run", str(root / "incline.toml"), "-o", str(root / "incline"), "--quiet"]) == 0

@@ -77,7 +77,7 @@ def test_random_packing_of_a_100_m_cube_at_1_cm_is_refused(tmp_path, capsys):
 
 
 def _incline(tmp_path, old, new):
-    text = (ROOT / "cases" / "dda_incline.toml").read_text()
+    text = (ROOT / "cases" / "scenes" / "dda_incline.toml").read_text()
     assert old in text
     return _write(tmp_path, text.replace(old, new))
 
@@ -280,7 +280,7 @@ def test_every_path_that_builds_a_model_goes_through_the_check(tmp_path, capsys)
     with pytest.raises(SceneError) as err:
         build_model(load_scene(huge))
     assert err.value.key == "limits.max_spheres"
-    from cases.evaluators import sgim_build, sgim_volume
+    from cases.lib.evaluators import sgim_build, sgim_volume
 
     with pytest.raises(SceneError, match="limits.max_spheres"):
         sgim_build(huge, None, {})
@@ -392,8 +392,8 @@ def test_every_dda_scene_of_cases_is_within_the_default_step_limit():
     from dda.scene import load_scene
 
     worst = 0
-    paths = [*(ROOT / "cases").glob("dda_*.toml"), *(ROOT / "cases" / "crossval").glob("*.toml"),
-             *(ROOT / "cases" / "studies" / "scenes").glob("*.toml")]
+    paths = [*(ROOT / "cases" / "scenes").glob("dda_*.toml"), *(ROOT / "cases" / "scenes" / "crossval").glob("*.toml"),
+             *(ROOT / "cases" / "scenes" / "studies" / "scenes").glob("*.toml")]
     for path in sorted(paths):
         if "[simulation]" not in path.read_text():
             continue  # an sgim scene (a model of a sphere scene)

@@ -74,7 +74,7 @@ def scene(tmp_path):
 
 @pytest.fixture
 def incline(tmp_path):
-    text = (ROOT / "cases" / "dda_incline.toml").read_text()
+    text = (ROOT / "cases" / "scenes" / "dda_incline.toml").read_text()
     text = text.replace("duration = 1.0", "duration = 0.02").replace("frames = 10", "frames = 2")
     assert "duration = 0.02" in text and "frames = 2" in text
     p = tmp_path / "incline.toml"
@@ -282,7 +282,7 @@ def _study(folder, values):
 
 
 def test_study_run_refuses_user_files_and_force_replaces_a_different_study(tmp_path, capsys):
-    from cases.study import main
+    from cases.lib.study import main
 
     a, b = _study(tmp_path / "a", "1.0, 2.0, 5.0"), _study(tmp_path / "b", "1.0, 3.0")
     out = tmp_path / "out"
@@ -316,7 +316,7 @@ def test_force_is_documented(run, args, capsys):
 
 
 def test_study_force_is_documented(capsys):
-    from cases.study import main
+    from cases.lib.study import main
 
     with pytest.raises(SystemExit):
         main(["run", "--help"])

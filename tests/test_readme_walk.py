@@ -3,7 +3,7 @@ a checkout, succeeds, and what the lines say they write is there.
 
 The block runs in a folder that holds the checkout's `cases` and `.venv` (links), so `out/` lands in a temporary
 folder; the lines run one after the other, each in bash, as a user pastes them. The Python walk
-(cases/example_api.py) is checked against its references here: the analytical slide of the incline and YADE's
+(cases/make/example_api.py) is checked against its references here: the analytical slide of the incline and YADE's
 run of the same column deck."""
 import json
 import math
@@ -34,11 +34,11 @@ def test_the_first_walk_runs_line_by_line(tmp_path):
     for ln in lines:
         p = subprocess.run(["bash", "-c", ln], cwd=tmp_path, capture_output=True, text=True, timeout=900, env=env)
         assert p.returncode == 0, f"{ln}\n{p.stderr[-2000:]}"
-        if "dda run cases/dda_incline.toml" in ln:
+        if "dda run cases/scenes/dda_incline.toml" in ln:
             assert re.search(r"slide distance: [0-9.]+ m \(reference 0.9064 m: error [-+][0-9.e-]+ %\)", p.stdout)
         if "study report" in ln:
             assert (tmp_path / "out/pof/report.md").is_file()
-        if "cases.example_api" in ln:  # the Python walk's numbers against their references
+        if "cases.make.example_api" in ln:  # the Python walk's numbers against their references
             slide = re.search(r"slide distance: ([0-9.]+) m, analytical ([0-9.]+) m", p.stdout)
             g, a, f = 9.81, math.radians(30), math.radians(20)
             assert slide and float(slide[1]) == pytest.approx(float(slide[2]), rel=1e-3)

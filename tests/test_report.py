@@ -1,4 +1,4 @@
-"""Study report (cases/report.py): Pareto front and probability of failure against brute-force transcriptions of
+"""Study report (cases/lib/report.py): Pareto front and probability of failure against brute-force transcriptions of
 their definitions, and write_report on synthetic study folders laid out as the runner writes them."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from cases.report import exceedance, pareto_front, probability_of_failure, wilson_interval, write_report
+from cases.lib.report import exceedance, pareto_front, probability_of_failure, wilson_interval, write_report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -179,7 +179,7 @@ def test_report_one_parameter_sweep(tmp_path):
 # --------------------------------------------------------------------------------------------- issue 17, point 9
 def _capture(monkeypatch):
     """What every saved figure shows: titles, axis labels and scales, colour norms (read from matplotlib)."""
-    import cases.report as rp
+    import cases.lib.report as rp
 
     seen = {}
     real = rp._save
@@ -239,7 +239,7 @@ def test_report_units_names_titles_inputs_and_timing_apart(tmp_path, monkeypatch
 
 
 def test_pole_projection_equal_area_lower_hemisphere():
-    from cases.report import pole_projection
+    from cases.lib.report import pole_projection
 
     # a horizontal plane's pole is vertical: the centre; a vertical plane dipping east has a horizontal pole
     # pointing west: on the primitive circle (radius sqrt 2 sin 45 = 1) at the west; dip 60 towards north: the
@@ -260,7 +260,7 @@ def test_pole_projection_equal_area_lower_hemisphere():
 def test_one_number_format_per_column_and_log_scales(tmp_path, monkeypatch):
     """The issue's column switched between `29815` and `2.994e+04`; a 65x error range was drawn on a linear colour
     scale."""
-    from cases.report import column_format
+    from cases.lib.report import column_format
 
     col = [29815.0, 29940.3, 31000.25, 30000.0]
     f = column_format(col)

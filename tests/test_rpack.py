@@ -372,12 +372,12 @@ def test_sieve_curve_recovered():
 # regions: fill shape, excavation, cavity (scene files)
 
 def test_core_sample_case():
-    """cases/core_sample.toml: a sieve-curve packing fills the closed cylinder of
-    cases/meshes/core_sample.obj to its surface, and the joint colours the spheres within 2 r."""
+    """cases/scenes/core_sample.toml: a sieve-curve packing fills the closed cylinder of
+    cases/scenes/meshes/core_sample.obj to its surface, and the joint colours the spheres within 2 r."""
     from sgim.builder import build_model
     from sgim.scene import dip_to_normal
 
-    scene = load_scene(ROOT / "cases" / "core_sample.toml")
+    scene = load_scene(ROOT / "cases" / "scenes" / "core_sample.toml")
     m = build_model(scene)
     X, R, C = m.centers, m.radii, m.colour
     rc, h = 0.027, 0.135

@@ -1,5 +1,5 @@
 """docs/scenes.md, the scene-key reference, is the fresh rendering of what the readers allow and read
-(cases/make_scene_docs.py); every key the readers allow, in the synthetic scenes and in the case scenes, is
+(cases/make/scene_docs.py); every key the readers allow, in the synthetic scenes and in the case scenes, is
 documented with a unit and a meaning; the defaults in the document are the ones the reader was recorded using."""
 import inspect
 import re
@@ -7,7 +7,7 @@ import tempfile
 
 import pytest
 
-from cases import make_scene_docs as M
+from cases.make import scene_docs as M
 from dda.generate import GENERATORS
 from dda.scene import generator_parameters
 from dda.scenedoc import DDA_KEYS, GENERATOR_PARAMS, record_dda

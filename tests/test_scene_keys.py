@@ -297,7 +297,7 @@ def test_liggghts_joints_open_is_refused_where_the_type_exclusion_is_not_the_joi
     import shutil
 
     from adapters.cli import main
-    from cases.crossval import CV
+    from cases.lib.crossval import CV
 
     shutil.copy(CV / "wedge_model.toml", tmp_path)
     text = (CV / "wedge.toml").read_text()

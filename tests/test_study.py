@@ -1,4 +1,4 @@
-"""Batch studies (cases/study.py, cases/_batch.py): parsing and sampling against transcriptions of the
+"""Batch studies (cases/lib/study.py, cases/lib/_batch.py): parsing and sampling against transcriptions of the
 definitions, the results table under faults (a case that raises, hangs, is killed; a rank killed; the whole job
 killed and started again), serial against `mpirun -n 2`, bad input."""
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cases.study import dump_toml, load_study, main
+from cases.lib.study import dump_toml, load_study, main
 from engine_runs import CI
 
 REPO = Path(__file__).resolve().parent.parent
@@ -50,7 +50,7 @@ PLUGIN = '''
 import os, signal, time
 from pathlib import Path
 import numpy as np
-from cases.study import Evaluator
+from cases.lib.study import Evaluator
 
 def faulty(scene_path, case_dir, params):
     mode = params.get("contact.mode", "ok")
@@ -237,8 +237,8 @@ def test_same_seed_same_cases_and_realisations(tmp_path):
 
 
 def test_toml_writer_round_trips_the_scene_files():
-    files = [REPO / "cases" / "dda_wedge.toml", REPO / "cases" / "open_pit_dfn.toml",
-             *sorted((REPO / "cases" / "crossval").glob("*.toml"))]
+    files = [REPO / "cases" / "scenes" / "dda_wedge.toml", REPO / "cases" / "scenes" / "open_pit_dfn.toml",
+             *sorted((REPO / "cases" / "scenes" / "crossval").glob("*.toml"))]
     for f in files:
         data = tomllib.loads(f.read_text())
         assert tomllib.loads(dump_toml(data)) == data, f
@@ -553,7 +553,7 @@ def test_table_keeps_any_character_through_restart_and_retry(tmp_path):
         assert all(r["p:contact.mode"] == "mode\u2028two\rthree\n" for r in rows)
         jl = [json.loads(ln) for ln in (out / "results.jsonl").read_text().split("\n") if ln]
         assert [r["label"] for r in jl[1:]] == TEXTS
-    from cases.report import read_results
+    from cases.lib.report import read_results
 
     _, back = read_results(out)
     assert [r["label"] for r in back[1:] if r["label"] is not None] == [t for t in TEXTS if t.strip()]
@@ -837,7 +837,7 @@ def test_evaluator_key_and_its_former_name(tmp_path, capsys):
     both = write_study(tmp_path / "c", body.format(keys='evaluator = "noop"\n        engine = "noop"'))
     assert main(["list", str(both)]) == 2
     assert "give the evaluator once" in capsys.readouterr().err
-    for f in sorted((REPO / "cases" / "studies").glob("*.toml")):
+    for f in sorted((REPO / "cases" / "scenes" / "studies").glob("*.toml")):
         data = tomllib.loads(f.read_text())
         assert "evaluator" in data and "engine" not in data, f
 
@@ -865,7 +865,7 @@ def test_reuse_process_option_shares_state(tmp_path):
 #    --reuse-process, serial and under mpirun)
 def test_bench_study_overhead_reports_machine_and_figures():
     mpirun_cmd(2)
-    r = subprocess.run([sys.executable, "-m", "cases.bench_study", "--overhead-only", "--noop", "12", "--json"],
+    r = subprocess.run([sys.executable, "-m", "cases.bench.study", "--overhead-only", "--noop", "12", "--json"],
                        cwd=REPO, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-CASES = HERE.parent / "cases"
+CASES = HERE.parent / "cases" / "scenes"
 
 
 def warm_sgim(work: Path):

@@ -1,0 +1,1 @@
+"""Benchmarks: `python -m cases.bench.NAME` (sgim, pack, meshquery, dda, sphere_block, adapters, study)."""
