@@ -29,7 +29,7 @@ def main(argv=None):
     if argv and argv[0] == "--version":
         import argparse
 
-        from sgim.cli import add_version
+        from sgim.common import add_version
 
         add_version(argparse.ArgumentParser(prog="cases")).parse_args(["--version"])
     if not argv or argv[0] not in COMMANDS:

@@ -11,6 +11,8 @@ The Python API (docs/api.md)::
 
 Names are imported from their modules when first used: ``import dda`` stays light.
 """
+import importlib
+
 import sgim as _sgim  # noqa: F401  (numba's cache folder for this source version: sgim/kernel_cache.py)
 
 __all__ = ["run", "load_scene", "RunOutcome", "BlockSystem", "Simulation", "ContactLaw", "SphereSet",
@@ -22,8 +24,6 @@ _WHERE = {"run": "runner", "RunOutcome": "runner", "load_scene": "scene", "Block
 
 def __getattr__(name):
     if name in _WHERE:
-        import importlib
-
         return getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
     raise AttributeError(f"module 'dda' has no attribute {name!r}")
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import _list_of_tables, read_region_cuts, region_mask  # (the scene reader calls read_reports)
+from .regions import read_region_cuts, region_mask
 
 # quantity -> (unit, what it is, where it applies: "block" needs a named block, "any" a block or sphere run,
 # "spheres" a sphere run)
@@ -60,7 +60,7 @@ def read_reports(rd, data, block_names, spheres):
     """The [[report]] tables of a scene (SceneError on a bad one); `block_names` the scene's blocks,
     `spheres` whether the scene has [spheres]."""
     out = []
-    tabs = _list_of_tables(rd, data, "report")
+    tabs = rd.list_of_tables(data, "report")
     for k, t in enumerate(tabs):
         key = f"report[{k}]"
         rd.known(t, REPORT_KEYS, key)
@@ -233,7 +233,7 @@ class Answers:
 
 def detached_spheres(sim):
     """Free spheres that no path of intact bonds joins to a fixed (or prescribed) sphere."""
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import coo_matrix  # not at the top: scipy.sparse only for this answer (fast `dda --help`)
     from scipy.sparse.csgraph import connected_components
 
     ss = sim.spheres

@@ -13,17 +13,18 @@ import json
 import sys
 from pathlib import Path
 
-from sgim.cli import FORCE_HELP, _progress, add_version, positive_int, run_command  # sgim's CLI conventions
+from sgim.common import FORCE_HELP, add_version, positive_int, progress_printer, run_command  # the CLI conventions
 
 from .answers import format_answer
+from .wedge import add_wedge_parser
 
 EXIT_BLOWUP = 3
 
 
 def cmd_run(args):
-    from .runner import run
+    from .runner import run  # not at the top: the engine's numba kernels load when a run starts (fast --help)
 
-    r = run(args.scene, Path(args.output), force=args.force, progress=_progress(args.quiet),
+    r = run(args.scene, Path(args.output), force=args.force, progress=progress_printer(args.quiet),
             max_steps=positive_int(args.max_steps, "--max-steps"))
     if args.json:
         print(json.dumps(r.summary, indent=2))
@@ -49,12 +50,7 @@ def make_parser():
     r.add_argument("--max-steps", metavar="N", help="refuse a run of more than N steps (duration / dt; overrides "
                                                     "the scene's [simulation] max_steps, default 1e8)")
     r.set_defaults(func=cmd_run)
-    try:
-        from .wedge import add_wedge_parser
-    except ImportError:  # the wedge command lives in its own module
-        add_wedge_parser = None
-    if add_wedge_parser is not None:
-        add_wedge_parser(sub)
+    add_wedge_parser(sub)
     return p
 
 

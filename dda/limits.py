@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from sgim.scene import SceneError
+from sgim.common import SceneError
 
 DEFAULT_MAX_STEPS = 100_000_000
 

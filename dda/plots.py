@@ -28,7 +28,7 @@ def _moves(pos, vel, moving):
 def plot_series(path, title, time, energy, bodies):
     """Write the PNG. `bodies`: list of (name, pos (r, n, 3), vel (r, n, 3) or None (then the time derivative of
     the positions), moving (n,) bool)."""
-    import matplotlib
+    import matplotlib  # not at the top: seconds to load, for the PNG only
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -5,6 +5,10 @@ import os
 
 import numpy as np
 
+from sgim.render import Frame
+
+# pyvista is imported inside the functions that draw: it takes seconds to load, and only the frames and pictures
+# need it
 MOVING = np.array([0.80, 0.74, 0.60])  # sandstone
 FIXED = np.array([0.55, 0.55, 0.58])
 
@@ -106,8 +110,6 @@ def render_meshes(path, blocks=None, spheres=None, width=1600, height=1100, titl
     for sgim pictures (sgim.render.Frame); `time` [s], when given, follows the title. Returns the picture's facts
     (legend, colour range, scale bar)."""
     import pyvista as pv
-
-    from sgim.render import Frame
 
     if time is not None:
         title = f"{title + '   ' if title else ''}t = {float(time):.4g} s"

@@ -16,12 +16,18 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import CliError, output_folder
+from sgim.common import CliError
 from sgim.machine import machine_info
+from sgim.outdir import output_folder
 
 from .answers import Answers, default_reports
 from .plots import plot_series
-from .results import ENERGY_COLUMNS
+from .progress import RunProgress
+from .render import (block_polydata, faces_polydata, render_meshes, render_png, save_mesh, sphere_polydata,
+                     write_pvd, write_vtu)
+from .results import ENERGY_COLUMNS, save_final, save_sphere_csv
+from .scene import DDAScene, load_scene, scene_from_dict
+from .simulation import BlowUpError
 
 
 @dataclass
@@ -53,9 +59,6 @@ class _Nowhere:
 
 
 def _write_outputs(scene, sim, res, tmp, frames, summary, say, out):
-    from .render import render_png, write_pvd
-    from .results import save_final
-
     if "npz" in scene.formats:
         res.save_npz(tmp / "series.npz")
     if "csv" in scene.formats:
@@ -80,9 +83,6 @@ def _run_frames(sim, scene, say, frame, append):
     """Run `sim` for the scene's duration in `scene.frames` pieces, calling `frame()` before the first and after
     each piece; `append(res, r)` merges a piece's results into the run's. Returns (results, status, message):
     on a blow-up the results so far, "blow-up" and its message."""
-    from .progress import RunProgress
-    from .simulation import BlowUpError
-
     frame()
     piece = scene.duration / scene.frames
     clock = RunProgress(say, sim.time + scene.duration, sim.time, sim.steps)  # percent and ETA of the whole run
@@ -131,8 +131,6 @@ def _model_colour(model, n):
 
 def _sphere_meshes(sim, colour):
     """(spheres, blocks) pyvista meshes of the current state of a SphereSimulation (blocks None: no walls)."""
-    from .render import block_polydata, faces_polydata, sphere_polydata
-
     ss = sim.spheres
     spheres = sphere_polydata(sim.x, ss.radii, fixed=ss.fixed, velocity=sim.v, displacement=sim.displacement(),
                               colour=colour)
@@ -152,9 +150,6 @@ def _run_spheres(scene, out, dest, formats, max_steps, say, t0):
     (frames/spheres_*.vtu: points with radius, fixed, velocity, displacement, colour; frames/blocks_*.vtu, or one
     frames/walls.vtu when no block moves) indexed with their times in spheres.pvd (part 0 spheres, part 1
     blocks), the final spheres.vtu / blocks.vtu, final.png and summary.json."""
-    from .render import render_meshes, save_mesh, write_pvd
-    from .results import save_sphere_csv
-
     ss, sim = scene.build_spheres(max_steps=max_steps)  # step limit: SceneError
     colour = _model_colour(scene.spheres["model"], ss.n)
     answers = Answers(scene.reports or default_reports(True), sim, spheres=True)
@@ -236,10 +231,8 @@ def run(scene, out=None, force=False, progress=None, max_steps=None) -> RunOutco
 
     Returns a RunOutcome: the simulation in its final state, the recorded series, the summary (the contents of
     summary.json) and the answers the scene declares ([[report]]). Bad input raises sgim.scene.SceneError (or
-    sgim.errors.CliError for the output folder) before anything is written; a blow-up returns the last good
+    sgim.common.CliError for the output folder) before anything is written; a blow-up returns the last good
     state with status "blow-up"."""
-    from .scene import DDAScene, load_scene, scene_from_dict
-
     t0 = time.perf_counter()
     say = progress
     if isinstance(scene, dict):  # the tables of a scene file
@@ -266,8 +259,6 @@ def run(scene, out=None, force=False, progress=None, max_steps=None) -> RunOutco
         want_vtu = "vtu" in formats
         if want_vtu:
             (tmp / "frames").mkdir()
-        from .render import write_vtu
-
         def frame():
             if want_vtu:
                 name = f"frames/frame_{len(frames):05d}.vtu"

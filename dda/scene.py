@@ -1,7 +1,7 @@
 """DDA scene files (TOML): parsing and validation into blocks, materials, contact laws and run settings.
 
-Every problem raises :class:`sgim.scene.SceneError` (one line naming file, key and value) before anything is
-written. Keys::
+Every problem raises :class:`sgim.common.SceneError` (one line naming file, key and value; read through
+sgim/reader.py) before anything is written. Keys::
 
     name = "incline"
     [simulation]   duration (s, required), dt (0 or absent: automatic), safety = 0.5, gravity = [0, 0, -9.81],
@@ -54,18 +54,32 @@ written. Keys::
 """
 from __future__ import annotations
 
+import difflib
+import inspect
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from sgim.portable import matmul
-from sgim.geometry import MIN_LENGTH
-from sgim.scene import COORD, MAX_COORD, SIZE, SceneError, _Reader
+from sgim.common import SceneError
+from sgim.geometry import MAX_COORD, MIN_LENGTH, dip_to_normal
+from sgim.model import SphereModel
+from sgim.readback import BadFile
+from sgim.reader import COORD, SIZE, SceneReader, read_toml
+from sgim.scene import load_scene as load_sgim_scene
+from sgim.scene import parse_cut, read_limits
 
-from .simulation import ContactLaw
+from .answers import read_reports
+from .blockspec import BlockSpec
+from .generate import GENERATORS
+from .limits import check_block_run, check_sphere_run
+from .polyhedra import PolyhedronError, check_convex, half_edges
+from .regions import SphereLoadError, fixed_mask, load_region, read_region_cuts, sphere_load_arrays
+from .shapes import SHAPES, GeometryError, load_convex_mesh, rotation_about, shape
+from .simulation import ContactLaw, Simulation
+from .spheres import BondLaw, SphereSimulation, load_model, viscous_coefficient
+from .system import BlockSystem
 
 OUTPUT_FORMATS = ("npz", "csv", "vtu", "png")
 TOP_KEYS = {"name", "description", "simulation", "contact", "material", "contact_pair", "block", "generate",
@@ -91,13 +105,48 @@ DENSITY = {"lo": 1e-20, "hi": 1e40, "unit": " kg/m3"}
 DURATION = {"hi": 1e12, "unit": " s"}  # 30 000 years: steps = duration / dt stay finite
 RATIO = {"hi": 1e3, "unit": ""}  # dimensionless factors (bond shear / normal stiffness, bond radius)
 
+# The defaults of the optional keys, in one table (key path -> value; docs/scenes.md lists them, dda/scenedoc.py).
+# Scene-dependent defaults stay in the reader: simulation.record_every = duration / 100, [contact] ks = kn / 2,
+# spheres.joint_friction = [contact] friction; [contact] (kn required) and [[contact_pair]] take the defaults of
+# dda.simulation.ContactLaw (friction 30 deg, no cohesion, tensile strength or damping) resp. of [contact].
+DEFAULTS = {
+    "simulation.dt": 0.0,  # s; 0: automatic
+    "simulation.safety": 0.5,
+    "simulation.gravity": (0.0, 0.0, -9.81),  # m/s2
+    "simulation.local_damping": 0.0,
+    "simulation.viscous_damping": 0.0,
+    "simulation.frames": 20,
+    "simulation.sleep": False,
+    "material[].density": 2600.0,  # kg/m3
+    "material[].E": 1e10,  # Pa
+    "material[].nu": 0.25,
+    "block[].fixed": False,
+    "block[].material": "rock",
+    "block[].velocity": (0.0, 0.0, 0.0),  # m/s
+    "block[].angular_velocity": (0.0, 0.0, 0.0),  # rad/s
+    "block[].prescribed": False,
+    "block[].force": (0.0, 0.0, 0.0),  # N
+    "block[].center": (0.0, 0.0, 0.0),  # m
+    "block[].rotation_axis": (0.0, 0.0, 1.0),
+    "spheres.density": 2600.0,  # kg/m3
+    "spheres.bond_young": 1e9,  # Pa
+    "spheres.bond_shear_ratio": 0.4,
+    "spheres.bond_tensile": float("inf"),  # Pa: unbreakable
+    "spheres.bond_shear": float("inf"),  # Pa: unbreakable
+    "spheres.bond_damping": 0.0,
+    "spheres.bond_radius_factor": 1.0,
+    "render.width": 1600,  # pixels
+    "render.height": 1100,  # pixels
+}
+D = DEFAULTS  # the short name the reader below uses
+
 
 @dataclass
 class Material:
     name: str
-    density: float = 2600.0
-    E: float = 1e10
-    nu: float = 0.25
+    density: float = DEFAULTS["material[].density"]
+    E: float = DEFAULTS["material[].E"]
+    nu: float = DEFAULTS["material[].nu"]
 
 
 @dataclass
@@ -117,8 +166,8 @@ class DDAScene:
     record_every: float
     frames: int
     formats: tuple
-    width: int = 1600
-    height: int = 1100
+    width: int = DEFAULTS["render.width"]
+    height: int = DEFAULTS["render.height"]
     sources: list = field(default_factory=list)  # scene key that produced each block
     loads: list = field(default_factory=list)  # (block index, world point or None, force)
     sleep: dict = field(default_factory=dict)  # Simulation sleep keywords
@@ -134,8 +183,6 @@ class DDAScene:
 
         SceneError when `duration` (default the scene's) at the run's dt passes the step limit (`max_steps`,
         the --max-steps value, else the scene's; dda/limits.py)."""
-        from .spheres import SphereSimulation, load_model
-
         sp = self.spheres
         ss = load_model(sp["model"], density=sp["density"], bonds=sp["bonds"])
         ss.fixed |= self.fixed_spheres(ss.centers)
@@ -156,8 +203,6 @@ class DDAScene:
             walls = self.block_system()  # moving blocks: one coupled loop with the spheres
         visc = 0.0
         if self.viscous_damping:  # a ratio of critical damping of the first mode -> c [N s/m]
-            from .spheres import viscous_coefficient
-
             try:
                 zeta = 1.0 if self.viscous_damping == "critical" else float(self.viscous_damping)
                 visc = viscous_coefficient(zeta, ss.centers, ss.mass, ss.fixed | ss.prescribed, ss.bond_i,
@@ -166,8 +211,6 @@ class DDAScene:
                 raise SceneError(self.path, "simulation.viscous_damping", self.viscous_damping, str(exc)) from None
         sim = SphereSimulation(ss, self.law, walls=walls, gravity=self.gravity, dt=self.dt, safety=self.safety,
                                local_damping=self.local_damping, pair_laws=self.pair_laws, viscous_damping=visc)
-        from .limits import check_sphere_run
-
         check_sphere_run(self, ss, sim, max_steps=max_steps, duration=duration)
         return ss, sim
 
@@ -184,8 +227,6 @@ class DDAScene:
 
     def block_system(self):
         """BlockSystem of the scene's blocks (materials, body and point loads)."""
-        from .system import BlockSystem
-
         bs = BlockSystem()
         for spec in self.blocks:
             m = self.materials.get(spec.material) or Material(spec.material)
@@ -206,9 +247,6 @@ class DDAScene:
         SceneError when `duration` (default the scene's) at the run's dt passes the step limit (`max_steps`,
         the --max-steps value, else the scene's; dda/limits.py); `check` false: no step check (the caller
         makes its own)."""
-        from .limits import check_block_run
-        from .simulation import Simulation
-
         bs = self.block_system()
 
         def step_check(sim):
@@ -218,100 +256,6 @@ class DDAScene:
                          local_damping=self.local_damping, pair_laws=self.pair_laws,
                          on_dt=step_check if check else None, **self.sleep)
         return bs, sim
-
-
-class SphereLoadError(ValueError):
-    """A [[spheres.load]] table that does not fit the model: ``key``, ``value`` and the message."""
-
-    def __init__(self, key, value, message):
-        super().__init__(message)
-        self.key, self.value = key, value
-
-
-def _cut_mask(c, cut):
-    """Spheres at `c` on the kept side of one parsed cut ("z>2.6": (axis, sign, value))."""
-    axis, sign, value = cut
-    return sign * (c[:, axis] - value) > 0
-
-
-def region_mask(centers, cuts):
-    """Mask of the spheres at `centers` inside a sphere region: every cut of `cuts` holds."""
-    c = np.asarray(centers, float).reshape(-1, 3)
-    mask = np.ones(len(c), bool)
-    for cut in cuts:
-        mask &= _cut_mask(c, cut)
-    return mask
-
-
-def fixed_mask(centers, cuts, below):
-    """[spheres] fixed flags of the spheres at `centers`: inside any fixed cut ("z>2.6") or below any
-    fixed_below plane ((normal, point) pairs)."""
-    c = np.asarray(centers, float).reshape(-1, 3)
-    fixed = np.zeros(len(c), bool)
-    for cut in cuts:
-        fixed |= _cut_mask(c, cut)
-    for normal, point in below:
-        fixed |= matmul(c - point, normal) < 0
-    return fixed
-
-
-def load_region(load, centers):
-    """Mask of the spheres at `centers` inside the region of one parsed [[spheres.load]] table."""
-    kind, spec = load["region"]
-    if kind == "below":
-        normal, point = spec
-        return matmul(np.asarray(centers, float).reshape(-1, 3) - point, normal) < 0
-    return region_mask(centers, spec)
-
-
-def sphere_load_arrays(loads, centers, fixed):
-    """(force, prescribed, velocity) of parsed [[spheres.load]] tables on the spheres at `centers` (see
-    DDAScene.sphere_loads). SphereLoadError for a region without a sphere, a fixed sphere in a loaded region,
-    or a sphere under a velocity load and another load."""
-    c = np.asarray(centers, float).reshape(-1, 3)
-    n = len(c)
-    fixed = np.asarray(fixed, bool)
-    force = np.zeros((n, 3))
-    velocity = np.zeros((n, 3))
-    by = np.full(n, -1, np.int64)  # the first load of each sphere
-    prescribed = np.zeros(n, bool)
-    for k, load in enumerate(loads):
-        key, shown = load["key"], load["shown"]
-        mask = load_region(load, c)
-        where = f"{key}.{load['where']}"
-        if not mask.any():
-            raise SphereLoadError(where, shown, "no sphere in region")
-        if (mask & fixed).any():
-            raise SphereLoadError(where, shown, f"{int((mask & fixed).sum())} of its {int(mask.sum())} spheres are "
-                                  "fixed ([spheres] fixed / fixed_below): a sphere cannot be both fixed and loaded")
-        clash = mask & (prescribed if load["kind"] == "force" else (by >= 0))
-        if clash.any():
-            other = loads[int(by[np.flatnonzero(clash)[0]])]["key"]
-            raise SphereLoadError(where, shown, f"{int(clash.sum())} of its spheres are also loaded by {other}: a "
-                                  "sphere with a prescribed velocity takes no other load")
-        by[mask & (by < 0)] = k
-        if load["kind"] == "force":
-            force[mask] += load["value"]
-        else:
-            prescribed |= mask
-            velocity[mask] = load["value"]
-    return force, prescribed, velocity
-
-
-def read_region_cuts(rd, value, key):
-    """A sphere region: "z>2.6" or a list of such cuts, all of which must hold -> [(axis, sign, value), ...]."""
-    from sgim.scene import parse_cut
-
-    exprs = [value] if isinstance(value, str) else value
-    if not isinstance(exprs, list) or not exprs:
-        rd.err(key, value, 'must be a string like "z>2.6" or a list of them (all must hold)')
-    cuts = []
-    for e in exprs:
-        try:
-            cuts.append(parse_cut(e))
-        except ValueError as exc:
-            rd.err(key, e, str(exc))
-    return cuts
 
 
 def _read_sphere_loads(rd, raw, centers, fixed):
@@ -332,8 +276,6 @@ def _read_sphere_loads(rd, raw, centers, fixed):
         if where[0] == "region":
             region = ("region", read_region_cuts(rd, lt["region"], f"{key}.region"))
         else:
-            from sgim.geometry import dip_to_normal
-
             row = rd.vector(lt, "below", f"{key}.below", n=5, **COORD)
             if not (0.0 <= row[0] <= 90.0 and -360.0 <= row[1] <= 360.0):
                 rd.err(f"{key}.below", row.tolist(), "dip must be 0..90 and dip direction -360..360 deg")
@@ -352,10 +294,6 @@ def _read_spheres(rd, data, path):
     """[spheres] model = "model.npz" or an sgim scene "x.toml" (built in memory; relative to the scene), density, fixed = ["z>2.6"], bond_* keys."""
     if "spheres" not in data:
         return {}
-    from sgim.scene import parse_cut
-
-    from .spheres import BondLaw
-
     st = rd.table(data, "spheres", "spheres")
     rd.known(st, SPHERE_KEYS, "spheres")
     name = rd.string(st, "model", "spheres.model", "")
@@ -373,38 +311,33 @@ def _read_spheres(rd, data, path):
             regions.append(parse_cut(e))
         except ValueError as exc:
             rd.err("spheres.fixed", e, str(exc))
-    inf = float("inf")
     law = BondLaw(
-        young=rd.number(st, "bond_young", "spheres.bond_young", default=1e9, positive=True, **MODULUS),
+        young=rd.number(st, "bond_young", "spheres.bond_young", default=D["spheres.bond_young"], positive=True,
+                        **MODULUS),
         kn=rd.number(st, "bond_kn", "spheres.bond_kn", positive=True, **STIFFNESS) if "bond_kn" in st else None,
         ks=rd.number(st, "bond_ks", "spheres.bond_ks", nonneg=True, hi=STIFFNESS["hi"], unit=STIFFNESS["unit"])
         if "bond_ks" in st else None,
-        shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio", default=0.4, nonneg=True,
-                              **RATIO),
-        tensile=rd.number(st, "bond_tensile", "spheres.bond_tensile", default=inf, nonneg=True),
-        shear=rd.number(st, "bond_shear", "spheres.bond_shear", default=inf, nonneg=True),
-        damping=rd.number(st, "bond_damping", "spheres.bond_damping", default=0.0, nonneg=True, hi=1.0),
-        radius_factor=rd.number(st, "bond_radius_factor", "spheres.bond_radius_factor", default=1.0, positive=True,
-                                **RATIO),
+        shear_ratio=rd.number(st, "bond_shear_ratio", "spheres.bond_shear_ratio",
+                              default=D["spheres.bond_shear_ratio"], nonneg=True, **RATIO),
+        tensile=rd.number(st, "bond_tensile", "spheres.bond_tensile", default=D["spheres.bond_tensile"], nonneg=True),
+        shear=rd.number(st, "bond_shear", "spheres.bond_shear", default=D["spheres.bond_shear"], nonneg=True),
+        damping=rd.number(st, "bond_damping", "spheres.bond_damping", default=D["spheres.bond_damping"], nonneg=True,
+                          hi=1.0),
+        radius_factor=rd.number(st, "bond_radius_factor", "spheres.bond_radius_factor",
+                                default=D["spheres.bond_radius_factor"], positive=True, **RATIO),
     )
     if mp.suffix.lower() == ".toml":  # an sgim scene: build its model in memory
-        from sgim.builder import build_model
-        from sgim.scene import load_scene
+        from sgim.builder import build_model  # not at the top: the builder's kernels, for .toml models only
 
-        model = build_model(load_scene(mp))  # a bad sgim scene raises its own one-line SceneError
+        model = build_model(load_sgim_scene(mp))  # a bad sgim scene raises its own one-line SceneError
     else:
-        from sgim.model import SphereModel
-        from sgim.readback import BadFile
-
         try:
             model = SphereModel.load(mp)  # validated: a file that is not a usable model is one BadFile line
         except BadFile as exc:
             rd.err("spheres.model", name, exc.what)
-    density = rd.number(st, "density", "spheres.density", default=2600.0, positive=True, **DENSITY)
+    density = rd.number(st, "density", "spheres.density", default=D["spheres.density"], positive=True, **DENSITY)
     below = []
     if "fixed_below" in st:
-        from sgim.geometry import dip_to_normal
-
         rows = rd.matrix(st, "fixed_below", "spheres.fixed_below", 5, **COORD)
         for row in rows:
             if not (0.0 <= row[0] <= 90.0 and -360.0 <= row[1] <= 360.0):
@@ -430,8 +363,6 @@ GENERATOR_SIZES = {"size", "height", "b", "h", "depth", "base_length", "base_thi
 
 def generator_parameters(fn):
     """The parameters a scene may give a [[generate]] function (its progress callback is the run's)."""
-    import inspect
-
     return [p for p, s in inspect.signature(fn).parameters.items()
             if s.kind in (s.POSITIONAL_OR_KEYWORD, s.KEYWORD_ONLY) and p != "progress"]
 
@@ -439,14 +370,10 @@ def generator_parameters(fn):
 def _generator_types(rd, fn, params, key):
     """A [[generate]] parameter whose default is a number, a string, a flag or a list of numbers must be given as
     one (the generators would convert "13" to 13 without a word)."""
-    import inspect
-
     sig = inspect.signature(fn).parameters
     allowed = generator_parameters(fn)
     for p, v in params.items():
         if p not in allowed:
-            import difflib
-
             near = difflib.get_close_matches(p, allowed, n=1)
             rd.err(f"{key}.{p}", v, (f"unknown parameter (did you mean {near[0]!r}?); " if near else
                                      "unknown parameter; ") + f"{fn.__name__} takes: {', '.join(allowed)}")
@@ -503,67 +430,27 @@ def _law(rd, tab, key, base=None):
 
 def load_scene(path) -> DDAScene:
     """The validated DDAScene of the scene file `path` (blocks, materials, contact laws, [spheres], run
-    settings); any problem raises sgim.scene.SceneError naming the file, key and value."""
+    settings); any problem raises SceneError (sgim/common.py) naming the file, key and value."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(path, "(file)", str(path), f"cannot read scene file ({exc.__class__.__name__})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(path, "(toml)", str(exc).split("\n")[0], "not valid TOML") from None
+    data, text = read_toml(path)
     return scene_from_dict(data, path, text)
-
-
-def _list_of_tables(rd, data, name):
-    v = data.get(name, [])
-    if not isinstance(v, list) or any(not isinstance(t, dict) for t in v):
-        rd.err(name, v, f"must be an array of tables ([[{name}]])")
-    return v
 
 
 def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
     """The validated DDAScene of a parsed scene file; `reader(path)` makes the value reader (default
-    sgim.scene._Reader; dda/scenedoc.py passes one that records what is read)."""
+    sgim.reader.SceneReader; dda/scenedoc.py passes one that records what is read)."""
     path = Path(path)
-    rd = (reader or _Reader)(path)
+    rd = (reader or SceneReader)(path)
     rd.known(data, TOP_KEYS, "")
     name = rd.string(data, "name", "name", path.stem)
 
-    st = rd.table(data, "simulation", "simulation", required=True)
-    rd.known(st, SIMULATION_KEYS, "simulation")
-    max_steps, max_steps_key = _max_steps(rd, data, st)
-    sleep = {"sleep": rd.boolean(st, "sleep", "simulation.sleep", False)}
-    for k in ("sleep_velocity", "sleep_accel"):
-        if k in st:
-            sleep[k] = rd.number(st, k, f"simulation.{k}", positive=True)
-    if "sleep_steps" in st:
-        sleep["sleep_steps"] = int(rd.number(st, "sleep_steps", "simulation.sleep_steps", lo=1, hi=1e9))
-    duration = rd.number(st, "duration", "simulation.duration", positive=True, **DURATION)
-    dt = rd.number(st, "dt", "simulation.dt", default=0.0, nonneg=True) or None
-    safety = rd.number(st, "safety", "simulation.safety", default=0.5, positive=True, hi=1.0)
-    gravity = rd.vector(st, "gravity", "simulation.gravity", default=(0.0, 0.0, -9.81))
-    local_damping = rd.number(st, "local_damping", "simulation.local_damping", default=0.0, nonneg=True, hi=0.99)
-    viscous_damping = 0.0
-    if "viscous_damping" in st:
-        vd = st["viscous_damping"]
-        if isinstance(vd, str):
-            if vd != "critical":
-                rd.err("simulation.viscous_damping", vd, 'must be a ratio of critical damping or "critical"')
-            viscous_damping = vd
-        else:
-            viscous_damping = rd.number(st, "viscous_damping", "simulation.viscous_damping", nonneg=True, hi=1e3)
-    record_every = rd.number(st, "record_every", "simulation.record_every", default=duration / 100, positive=True)
-    if record_every > duration:
-        rd.err("simulation.record_every", record_every, f"must not exceed simulation.duration = {duration:g}")
-    frames = int(rd.number(st, "frames", "simulation.frames", default=20, lo=1, hi=100000))
+    sim = _read_simulation(rd, data)
 
     ct = rd.table(data, "contact", "contact", required=True)
     law = _law(rd, ct, "contact")
 
     materials = {}
-    for k, mt in enumerate(_list_of_tables(rd, data, "material")):
+    for k, mt in enumerate(rd.list_of_tables(data, "material")):
         key = f"material[{k}]"
         rd.known(mt, {"name", "density", "E", "nu"}, key)
         mname = rd.string(mt, "name", f"{key}.name", "")
@@ -571,12 +458,12 @@ def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
             rd.err(f"{key}.name", mname, "missing material name")
         if mname in materials:
             rd.err(f"{key}.name", mname, "material defined twice")
-        materials[mname] = Material(mname, rd.number(mt, "density", f"{key}.density", default=2600.0, positive=True,
-                                                     **DENSITY),
-                                    rd.number(mt, "E", f"{key}.E", default=1e10, positive=True, **MODULUS),
-                                    rd.number(mt, "nu", f"{key}.nu", default=0.25, lo=0.0, hi=0.4999))
+        materials[mname] = Material(mname, rd.number(mt, "density", f"{key}.density", default=D["material[].density"],
+                                                     positive=True, **DENSITY),
+                                    rd.number(mt, "E", f"{key}.E", default=D["material[].E"], positive=True, **MODULUS),
+                                    rd.number(mt, "nu", f"{key}.nu", default=D["material[].nu"], lo=0.0, hi=0.4999))
     pair_laws = {}
-    for k, pt in enumerate(_list_of_tables(rd, data, "contact_pair")):
+    for k, pt in enumerate(rd.list_of_tables(data, "contact_pair")):
         key = f"contact_pair[{k}]"
         mats = pt.get("materials")
         if not (isinstance(mats, list) and len(mats) == 2 and all(isinstance(m, str) for m in mats)):
@@ -584,13 +471,11 @@ def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
         pair_laws[tuple(mats)] = _law(rd, pt, key, base=law)
 
     blocks, sources = [], []
-    for k, bt in enumerate(_list_of_tables(rd, data, "block")):
+    for k, bt in enumerate(rd.list_of_tables(data, "block")):
         blocks.append(_read_block(rd, bt, f"block[{k}]", path))
         sources.append(f"block[{k}]")
-    for k, gt in enumerate(_list_of_tables(rd, data, "generate")):
+    for k, gt in enumerate(rd.list_of_tables(data, "generate")):
         key = f"generate[{k}]"
-        from .generate import GENERATORS
-
         kind = gt.get("kind")
         if kind not in GENERATORS:
             rd.err(f"{key}.kind", kind, f"must be one of {', '.join(sorted(GENERATORS))}")
@@ -609,8 +494,6 @@ def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
     spheres = _read_spheres(rd, data, path)
     if not blocks and not spheres:
         rd.err("block", None, "the scene has no blocks (give [[block]] or [[generate]] tables)")
-    from .polyhedra import PolyhedronError, check_convex, half_edges
-
     for spec, src in zip(blocks, sources):
         try:
             half_edges(len(spec.vertices), spec.faces)
@@ -638,7 +521,7 @@ def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
     for k, spec in enumerate(blocks):
         names.setdefault(spec.name, k)
     loads = []
-    for k, lt in enumerate(_list_of_tables(rd, data, "load")):
+    for k, lt in enumerate(rd.list_of_tables(data, "load")):
         key = f"load[{k}]"
         rd.known(lt, {"block", "force", "point"}, key)
         bname = rd.string(lt, "block", f"{key}.block", "")
@@ -647,8 +530,6 @@ def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
         force = rd.vector(lt, "force", f"{key}.force")
         point = rd.vector(lt, "point", f"{key}.point", **COORD) if "point" in lt else None
         loads.append((names[bname], point, force))
-
-    from .answers import read_reports
 
     reports = read_reports(rd, data, [b.name for b in blocks], bool(spheres))
     ot = rd.table(data, "output", "output")
@@ -660,18 +541,49 @@ def scene_from_dict(data, path="<scene>", text="", reader=None) -> DDAScene:
     rd.known(rt, {"width", "height"}, "render")
     return DDAScene(
         path=path, text=text, name=name, blocks=blocks, materials=materials, law=law, pair_laws=pair_laws,
-        duration=duration, dt=dt, safety=safety, gravity=gravity, local_damping=local_damping,
-        record_every=record_every, frames=frames, formats=tuple(formats),
-        width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
-        height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)), sources=sources,
-        loads=loads, sleep=sleep, spheres=spheres, max_steps=max_steps, max_steps_key=max_steps_key,
-        reports=reports, viscous_damping=viscous_damping)
+        formats=tuple(formats),
+        width=int(rd.number(rt, "width", "render.width", default=D["render.width"], lo=64, hi=8000)),
+        height=int(rd.number(rt, "height", "render.height", default=D["render.height"], lo=64, hi=8000)),
+        sources=sources, loads=loads, spheres=spheres, reports=reports, **sim)
+
+
+def _read_simulation(rd, data):
+    """The [simulation] table (and [limits] max_steps): the DDAScene keywords of the run settings."""
+    st = rd.table(data, "simulation", "simulation", required=True)
+    rd.known(st, SIMULATION_KEYS, "simulation")
+    max_steps, max_steps_key = _max_steps(rd, data, st)
+    sleep = {"sleep": rd.boolean(st, "sleep", "simulation.sleep", D["simulation.sleep"])}
+    for k in ("sleep_velocity", "sleep_accel"):
+        if k in st:
+            sleep[k] = rd.number(st, k, f"simulation.{k}", positive=True)
+    if "sleep_steps" in st:
+        sleep["sleep_steps"] = int(rd.number(st, "sleep_steps", "simulation.sleep_steps", lo=1, hi=1e9))
+    duration = rd.number(st, "duration", "simulation.duration", positive=True, **DURATION)
+    dt = rd.number(st, "dt", "simulation.dt", default=D["simulation.dt"], nonneg=True) or None
+    safety = rd.number(st, "safety", "simulation.safety", default=D["simulation.safety"], positive=True, hi=1.0)
+    gravity = rd.vector(st, "gravity", "simulation.gravity", default=D["simulation.gravity"])
+    local_damping = rd.number(st, "local_damping", "simulation.local_damping", default=D["simulation.local_damping"],
+                              nonneg=True, hi=0.99)
+    viscous_damping = D["simulation.viscous_damping"]
+    if "viscous_damping" in st:
+        vd = st["viscous_damping"]
+        if isinstance(vd, str):
+            if vd != "critical":
+                rd.err("simulation.viscous_damping", vd, 'must be a ratio of critical damping or "critical"')
+            viscous_damping = vd
+        else:
+            viscous_damping = rd.number(st, "viscous_damping", "simulation.viscous_damping", nonneg=True, hi=1e3)
+    record_every = rd.number(st, "record_every", "simulation.record_every", default=duration / 100, positive=True)
+    if record_every > duration:
+        rd.err("simulation.record_every", record_every, f"must not exceed simulation.duration = {duration:g}")
+    frames = int(rd.number(st, "frames", "simulation.frames", default=D["simulation.frames"], lo=1, hi=100000))
+    return dict(duration=duration, dt=dt, safety=safety, gravity=gravity, local_damping=local_damping,
+                record_every=record_every, frames=frames, sleep=sleep, max_steps=max_steps,
+                max_steps_key=max_steps_key, viscous_damping=viscous_damping)
 
 
 def _max_steps(rd, data, st):
     """(limit or None, key) from [simulation] max_steps or [limits] max_steps (not both)."""
-    from sgim.scene import read_limits
-
     lim = read_limits(rd, data, {"max_steps"})
     if "max_steps" in st:
         if "max_steps" in lim:
@@ -691,17 +603,16 @@ BLOCK_KEYS = {"name", "fixed", "material", "velocity", "angular_velocity", "pres
 
 
 def _read_block(rd, bt, key, scene_path):
-    from .blockspec import BlockSpec
-
     rd.known(bt, BLOCK_KEYS, key)
     fields = dict(
         name=rd.string(bt, "name", f"{key}.name", key),
-        fixed=rd.boolean(bt, "fixed", f"{key}.fixed", False),
-        material=rd.string(bt, "material", f"{key}.material", "rock"),
-        velocity=tuple(rd.vector(bt, "velocity", f"{key}.velocity", default=(0.0, 0.0, 0.0))),
-        angular_velocity=tuple(rd.vector(bt, "angular_velocity", f"{key}.angular_velocity", default=(0.0, 0.0, 0.0))),
-        prescribed=rd.boolean(bt, "prescribed", f"{key}.prescribed", False),
-        body_force=rd.vector(bt, "force", f"{key}.force", default=(0.0, 0.0, 0.0)),
+        fixed=rd.boolean(bt, "fixed", f"{key}.fixed", D["block[].fixed"]),
+        material=rd.string(bt, "material", f"{key}.material", D["block[].material"]),
+        velocity=tuple(rd.vector(bt, "velocity", f"{key}.velocity", default=D["block[].velocity"])),
+        angular_velocity=tuple(rd.vector(bt, "angular_velocity", f"{key}.angular_velocity",
+                                         default=D["block[].angular_velocity"])),
+        prescribed=rd.boolean(bt, "prescribed", f"{key}.prescribed", D["block[].prescribed"]),
+        body_force=rd.vector(bt, "force", f"{key}.force", default=D["block[].force"]),
     )
     if "dof" in bt:
         dof = rd.number(bt, "dof", f"{key}.dof")
@@ -713,11 +624,9 @@ def _read_block(rd, bt, key, scene_path):
         rd.err(key, sorted(bt), "give exactly one of: shape (+ size), vertices + faces, file")
     form = forms[0]
     if form == "shape":
-        from .shapes import SHAPES, GeometryError, rotation_about, shape
-
         sname = rd.choice(bt, "shape", f"{key}.shape", SHAPES, None)
         size = rd.number(bt, "size", f"{key}.size", positive=True, **SIZE)
-        centre = rd.vector(bt, "center", f"{key}.center", default=(0.0, 0.0, 0.0), **COORD)
+        centre = rd.vector(bt, "center", f"{key}.center", default=D["block[].center"], **COORD)
         kw = {}
         for extra in ("width", "height"):
             if extra in bt:
@@ -726,7 +635,7 @@ def _read_block(rd, bt, key, scene_path):
             kw["sides"] = int(rd.number(bt, "sides", f"{key}.sides", lo=3, hi=64))
         rotation = None
         if "rotation_angle" in bt:
-            axis = rd.vector(bt, "rotation_axis", f"{key}.rotation_axis", default=(0.0, 0.0, 1.0))
+            axis = rd.vector(bt, "rotation_axis", f"{key}.rotation_axis", default=D["block[].rotation_axis"])
             if np.abs(axis).max() > 0:
                 axis = axis / np.abs(axis).max()  # a direction: scaled first, so that its length cannot overflow
             if not np.linalg.norm(axis) > 0:
@@ -750,8 +659,6 @@ def _read_block(rd, bt, key, scene_path):
                 rd.err(f"{key}.faces[{i}]", f, f"vertex index out of range 0..{len(verts) - 1}")
         spec = BlockSpec(verts, faces)
     else:
-        from .shapes import load_convex_mesh
-
         fname = rd.string(bt, "file", f"{key}.file", "")
         fpath = Path(fname)
         if not fpath.is_absolute():

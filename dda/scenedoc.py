@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import copy
 import inspect
+import tomllib
 from pathlib import Path
 
 from sgim.scenedoc import K, show, write_scene_files
 
 from .generate import GENERATORS
-from .scene import generator_parameters
+from .scene import generator_parameters, scene_from_dict
 
 _LAW = {
     "kn": K("N/m", "normal stiffness per contact point"),
@@ -292,10 +293,6 @@ def dda_scenes():
 def record_dda(record, folder, case_files=(), synthetic=True):
     """Record the DDA reader over the synthetic scenes (files written into `folder`; each also read without each
     of its keys; not when `synthetic` is false) and over `case_files` (DDA scene files)."""
-    import tomllib
-
-    from .scene import scene_from_dict
-
     write_scene_files(folder)
     (Path(folder) / "beam.toml").write_text(_BEAM)
     for name, data in (dda_scenes() if synthetic else {}).items():

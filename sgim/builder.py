@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from . import __version__
+from .common import __version__
 from .cavities import carve
 from .cutting import Discs, SphereGrid, apply_bond_rule, colours, membership, touching_pairs
 from .excavate import FacetSet, kept_sites
@@ -45,7 +45,7 @@ def build_model(scene, progress=None, timer=None, max_spheres=None, estimate=Non
     tm = timer or Timer(progress)
     est = estimate if estimate is not None else check_build(scene, max_spheres=max_spheres, progress=tm.progress)
     if scene.packing.kind == "random":  # random dense packing of the kept region (sgim/rpack.py)
-        from .rpack import build_random
+        from .rpack import build_random  # random packings only: the packer's kernels load when needed
 
         centres, radii, pack_meta, cavity_meta = build_random(scene, tm, region=est.region, near=est.near)
         n = len(centres)
@@ -110,7 +110,7 @@ def _with_network(scene, discs, tm):
     hand-written discs; the network is kept on the scene for the output files."""
     if getattr(scene, "dfn", None) is None:
         return discs, None
-    from .dfn import append_discs, network_for
+    from .dfn import append_discs, network_for  # scenes with a fracture network only
 
     t0 = time.perf_counter()
     network = network_for(scene, progress=tm.progress)

@@ -10,40 +10,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
-from sgim.errors import CliError  # one class also under `python -m sgim.cli` (sgim/errors.py)
-
-EXIT_BAD_INPUT = 2
-
-
-def reader_gone():
-    """After a BrokenPipeError on stdout (the reader, e.g. `head`, closed the pipe): point stdout at devnull so
-    that the interpreter's final flush does not fail too; the command then ends quietly with status 0."""
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, sys.stdout.fileno())
-    return 0
-
-
-def _progress(quiet):
-    if quiet:
-        return None
-    t0 = time.perf_counter()
-
-    def say(msg):
-        print(f"[{time.perf_counter() - t0:7.2f} s] {msg}", file=sys.stderr, flush=True)
-
-    return say
+# absolute imports: the same classes also under `python -m sgim.cli` (sgim/common.py)
+from sgim.common import FORCE_HELP, CliError, add_version, positive_int, progress_printer, run_command
+from sgim.outdir import output_folder
 
 
 def cmd_build(args):
     from .scene import OUTPUT_FORMATS, load_scene
 
     t0 = time.perf_counter()
-    say = _progress(args.quiet)
+    say = progress_printer(args.quiet)
     scene = load_scene(args.scene)  # SceneError before anything is created
     formats = args.formats.split(",") if args.formats else list(scene.formats)
     bad = [f for f in formats if f not in OUTPUT_FORMATS]
@@ -107,7 +87,7 @@ def cmd_dfn(args):
     from .scene import load_scene
 
     t0 = time.perf_counter()
-    say = _progress(args.quiet)
+    say = progress_printer(args.quiet)
     scene = load_scene(args.scene)  # SceneError before anything is created
     if scene.dfn is None:
         raise CliError(f"{scene.path}: joint_set = None: the scene defines no fracture network "
@@ -129,32 +109,6 @@ def cmd_dfn(args):
         for line in format_statistics(net):
             print("  " + line)
     return 0
-
-
-def positive_int(text, flag):
-    """The value of a count flag (`--max-spheres 12000000` or `1.2e7`), None when not given; CliError otherwise."""
-    if text is None:
-        return None
-    try:
-        v = float(text)
-    except ValueError:
-        v = float("nan")
-    if not (v >= 1 and v < 2 ** 63 and v == int(v)):
-        raise CliError(f"{flag} = {text!r}: must be a positive integer (e.g. 12000000 or 1.2e7)")
-    return int(v)
-
-
-def output_folder(out, command, force=False, say=None):
-    """The checked output folder of a command (sgim/outdir.py): a CliError (one line, nothing touched) when
-    `out` holds files the command did not write, or its earlier output without `force`; its ``assemble()``
-    yields the temporary folder to write into."""
-    from .outdir import OutputFolder
-
-    return OutputFolder(out, command, force=force, say=say)
-
-
-FORCE_HELP = ("replace the command's earlier output in the folder (only the files it wrote there; files "
-              "added by hand stay)")
 
 
 def _load_model(path):
@@ -277,37 +231,6 @@ def make_parser():
     f.add_argument("--force", action="store_true", help=FORCE_HELP)
     f.set_defaults(func=cmd_dfn)
     return p
-
-
-def add_version(parser):
-    """``--version`` on every tool of the project: the rockdem distribution's version."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        v = version("rockdem")
-    except PackageNotFoundError:  # run from a source tree that was never installed
-        v = "(not installed)"
-    parser.add_argument("--version", action="version", version=f"%(prog)s (rockdem {v})")
-    return parser
-
-
-def run_command(prog, args, bad_input=()):
-    """``args.func(args)`` under the CLI conventions of every command of the project: bad input (SceneError,
-    CliError and the `bad_input` exception types) prints one line ``PROG: error: ...`` and gives exit status 2;
-    a reader closing the pipe (e.g. ``head``) ends the command quietly with status 0."""
-    try:
-        return args.func(args)
-    except BrokenPipeError:
-        return reader_gone()
-    except Exception as exc:
-        # SceneError can only come from sgim.scene once it is imported: looked up, not imported here (its
-        # geometry imports numba, a second of start-up for a command that may fail on its first file)
-        scene = sys.modules.get("sgim.scene")
-        bad = (CliError, *bad_input) + ((scene.SceneError,) if scene is not None else ())
-        if not isinstance(exc, bad):
-            raise
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
 
 
 def main(argv=None):

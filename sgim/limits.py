@@ -54,11 +54,16 @@ memory exceeds the memory available now (MemAvailable) is refused.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .scene import SceneError
+from .common import SceneError
+from .packing import lattice_counts
+
+# Random packings only: the packer's and grading's modules (numba kernels) and scipy.stats are imported inside
+# _estimate_random, so that the estimate of a lattice scene (and a refused build) stays fast.
 
 DENSITY = 0.64  # random packings: solid fraction assumed for the estimate (packer: 0.60 - 0.63 in bulk)
 BYTES_PER_SPHERE = {"cubic": 300, "hexagonal": 350, "fcc": 350, "random": 400}
@@ -84,8 +89,6 @@ def meminfo():
         pass
     if total is None:
         try:
-            import os
-
             total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
         except (ValueError, OSError, AttributeError):
             total = None
@@ -137,8 +140,6 @@ def estimate(scene) -> Estimate:
     """Spheres and memory of building `scene`, computed without allocating them (see the module docstring)."""
     kind = scene.packing.kind
     if kind != "random":
-        from .packing import lattice_counts
-
         sites, columns = lattice_counts(kind, scene.domain.min, scene.domain.max, scene.packing.radius)
         carved = bool(scene.excavations or getattr(scene, "cavities", None))
         nbytes = BASE_BYTES + float(sites) * BYTES_PER_SPHERE[kind] + float(columns) * BYTES_PER_COLUMN

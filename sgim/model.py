@@ -36,11 +36,13 @@ surf_face_start        (s+1,) i8       ... and faces [start[k], start[k+1])
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
+
+from .common import atomic_npz, atomic_path
+from .readback import Arrays, parse_json, read_npz
+from .vtu import array, constant, pieces, points_and_lines
 
 COLOUR_NAMES = ("intact", "red", "green", "blue")
 
@@ -111,7 +113,7 @@ class SphereModel:
         normal[on_disc] = np.asarray(self.disc_normal)[d[on_disc]]
         c = np.asarray(self.centers)
         if np.any(~on_disc):
-            from .meshquery import TriMesh
+            from .meshquery import TriMesh  # not at the top: numba kernels, loaded only for surface cuts
 
             vs, fs = surf["surf_vertex_start"], surf["surf_face_start"]
             for k, dk in enumerate(s_index):
@@ -140,8 +142,6 @@ class SphereModel:
     def load(cls, path):
         """The model in the model.npz `path`, validated (:func:`check_model`): a file that is not a readable
         model raises sgim.readback.BadFile (a CliError: ``FILE: what is wrong``)."""
-        from .readback import read_npz
-
         return cls(**check_model(path, read_npz(path, "a model.npz")))
 
     # -- exports -------------------------------------------------------------
@@ -155,8 +155,6 @@ class SphereModel:
         first), ``member_disc``, ``member_kind`` (1 inside, 2 green side, 3 blue side), ``member_offset``.
         Cell data: ``cell_kind`` (0 sphere, 1 bond), ``bonded`` (1 bonded, 0 cut, -1 on sphere cells),
         ``cut_by`` (the discontinuity index that cut the pair; -1 bonded, and on sphere cells)."""
-        from .vtu import array, constant, pieces, points_and_lines
-
         n, m = self.n, len(self.bonds)
         bonds = np.asarray(self.bonds, np.int64).reshape(-1, 2)
         bonded = np.asarray(self.bonded, bool)
@@ -226,8 +224,6 @@ def check_model(path, arrays, kind="a model.npz"):
     membership codes valid, every sphere, pair, discontinuity and vertex index in range; meta a JSON object.
     Raises sgim.readback.BadFile naming the file and the first defect. Used by every reader of a model
     (SphereModel.load)."""
-    from .readback import Arrays, parse_json
-
     A = Arrays(path, arrays, kind)
     A.missing(SphereModel.ARRAYS)
     kw = {}
@@ -309,39 +305,3 @@ def _write_rows(fh, fmt, cols, chunk=200_000):
     for s in range(0, n, chunk):
         rows = zip(*(c[s:s + chunk].tolist() for c in cols))
         fh.write("".join(line % r for r in rows))
-
-
-def atomic_npz(path, data):
-    """np.savez of the dict `data` to `path`, written under a temporary name and renamed into place."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **data)
-
-
-def atomic_vtu(path, mesh):
-    """A meshio Mesh written as binary VTU to `path` under a temporary name and renamed into place."""
-    import meshio
-
-    with atomic_path(path) as tmp:
-        meshio.write(tmp, mesh, file_format="vtu", binary=True, compression=None)
-
-
-class atomic_path:
-    """Context manager yielding a temporary name that is renamed to ``path`` on success."""
-
-    def __init__(self, path):
-        self.path = Path(path)
-        self.tmp = self.path.with_name(f".{self.path.name}.part{os.getpid()}")
-
-    def __enter__(self):
-        return str(self.tmp)
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
-            os.replace(self.tmp, self.path)
-        else:
-            try:
-                os.unlink(self.tmp)
-            except FileNotFoundError:
-                pass
-        return False

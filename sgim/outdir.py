@@ -27,14 +27,14 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from .common import CliError
+
 MARKER = ".rockdem-output"
 TMP_PREFIX = ".rockdem-part"
 SHOWN = 3  # names shown in a refusal
 
 
 def _cli_error(msg):
-    from .errors import CliError
-
     return CliError(msg)
 
 
@@ -219,3 +219,10 @@ class OutputFolder:
             if kept:
                 self.say(f"kept       {len(kept)} file{'s' if len(kept) != 1 else ''} this tool did not write: "
                          f"{shown_names(kept)}")
+
+
+def output_folder(out, command, force=False, say=None):
+    """The checked output folder of a command: a CliError (one line, nothing touched) when `out` holds files the
+    command did not write, or its earlier output without `force`; its ``assemble()`` yields the temporary folder
+    to write into."""
+    return OutputFolder(out, command, force=force, say=say)

@@ -4,7 +4,7 @@ Every reader of a file that a tool wrote earlier (model.npz, a deck's run.npz / 
 result.npz / result.json, ...) goes through these helpers. A file that is missing, empty, truncated, of another
 format (a PNG renamed, a single .npy, a zip of something else), of another kind (an npz without the arrays
 expected), or inconsistent (an array of the wrong dtype or shape, lengths that disagree, NaN or inf where a
-finite number is needed, an index out of range) raises :class:`BadFile`, a :class:`sgim.cli.CliError` whose
+finite number is needed, an index out of range) raises :class:`BadFile`, a :class:`sgim.common.CliError` whose
 text is ``FILE: what is wrong``: every command prints it as its one ``PROG: error: ...`` line with exit status
 2, before anything is written. ``allow_pickle`` is always False: nothing in a file is ever executed.
 """
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import CliError
+from .common import CliError
 
 ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip with members, an empty zip
 NPY_MAGIC = b"\x93NUMPY"

@@ -5,11 +5,15 @@ import contextlib
 import functools
 import os
 import sys
+from ctypes.util import find_library
 
 import numpy as np
 
-from .model import SphereModel, atomic_path
+from .common import atomic_path
+from .model import SphereModel
 from .scene import parse_cut
+
+# pyvista and vtk are imported inside the functions that draw: they take seconds to load, and only pictures need them
 
 COLOURS = np.array([
     [0.80, 0.74, 0.60],  # intact: sandstone
@@ -28,8 +32,6 @@ def _headless_window_class():
     renderer, or a GPU's driver), else OSMesa; None when neither is there."""
     if not sys.platform.startswith("linux"):
         return None
-    from ctypes.util import find_library
-
     for lib, window in (("EGL", "vtkEGLRenderWindow"), ("OSMesa", "vtkOSOpenGLRenderWindow")):
         if find_library(lib):
             return window

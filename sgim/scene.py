@@ -7,46 +7,46 @@ module writes files; validation is complete before any output is created.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .geometry import (
-    MAX_COORD,
-    MIN_LENGTH,
-    MeshError,
-    dip_to_normal,
-    facet_degeneracies,
-    load_mesh_file,
-    triangulate_plan,
-)
+from . import shapes
+from .common import SceneError  # noqa: F401  (also the scene API's name: sgim.scene.SceneError)
+from .geometry import MeshError, dip_to_normal, facet_degeneracies, load_mesh_file, triangulate_plan
+from .packing import lattice_counts
 from .portable import norm
+from .reader import COORD, LENGTH, SIZE, SceneReader, read_toml
+from .shapes import ShapeError
 
+# The readers of random packings (sgim/rpack.py), fracture networks (sgim/dfn.py), cavities and triangulated
+# surfaces (sgim/meshquery.py) are imported inside the functions that need them: their numba kernels load only
+# for the scenes that use them (a lattice scene, and `sgim build`'s refusals, stay fast).
 
-class SceneError(ValueError):
-    """A scene file (or a value in it) is invalid.  ``str(err)`` is one line."""
-
-    def __init__(self, file, key, value, message):
-        self.file, self.key, self.value, self.message = str(file), key, value, message
-        shown = _short(value)
-        super().__init__(f"{self.file}: {key} = {shown}: {message}")
-
-
-def _short(value, limit=80):
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-COORD = {"lo": -MAX_COORD, "hi": MAX_COORD, "unit": " m"}  # a coordinate (x, y or z)
-LENGTH = {"hi": MAX_COORD, "unit": " m"}  # a length that may be 0 (thickness)
-SIZE = {"lo": MIN_LENGTH, "hi": MAX_COORD, "unit": " m"}  # a length > 0 (radius, width, depth, ...)
 
 PACKING_KINDS = ("cubic", "hexagonal", "fcc", "random")  # random: sgim/rpack.py
 EXCAVATION_RULES = ("paper", "exact")
 BOND_RULES = ("colour", "geometric")
 OUTPUT_FORMATS = ("npz", "vtu", "txt", "png")
+
+# The defaults of the optional keys this module reads, in one table (key path -> value; docs/scenes.md lists
+# them with every other key, sgim/scenedoc.py). The tables of random packings, grading and fracture networks
+# are read, with their defaults, by sgim/rpack.py, sgim/grading.py and sgim/dfn.py.
+DEFAULTS = {
+    "packing.kind": "cubic",
+    "excavation[].rule": "paper",
+    "discontinuity[].thickness": 0.0,  # m: a joint (> 0: a fault)
+    "cavity[].segments": 48,  # facets around a swept or ellipsoid cavity (a box has its own 12 triangles)
+    "bonds.rule": "colour",
+    "bonds.tolerance": 1e-3,  # relative to ri + rj
+    "output.formats": OUTPUT_FORMATS,  # npz is always written
+    "render.hide_intact": False,
+    "render.translucent": False,
+    "render.cut_away": (),
+    "render.width": 1600,  # pixels
+    "render.height": 1100,  # pixels
+}
 
 
 @dataclass
@@ -86,17 +86,17 @@ class Disc:
 
 @dataclass
 class Bonds:
-    rule: str = "colour"
-    tolerance: float = 1e-3  # relative to ri + rj
+    rule: str = DEFAULTS["bonds.rule"]
+    tolerance: float = DEFAULTS["bonds.tolerance"]  # relative to ri + rj
 
 
 @dataclass
 class Render:
-    hide_intact: bool = False
-    translucent: bool = False
+    hide_intact: bool = DEFAULTS["render.hide_intact"]
+    translucent: bool = DEFAULTS["render.translucent"]
     cut_away: list = field(default_factory=list)  # ["x>0", ...]
-    width: int = 1600
-    height: int = 1100
+    width: int = DEFAULTS["render.width"]
+    height: int = DEFAULTS["render.height"]
 
 
 @dataclass
@@ -118,109 +118,7 @@ class Scene:
 
     @property
     def n_lattice_sites(self) -> int:
-        from .packing import lattice_counts
-
         return lattice_counts(self.packing.kind, self.domain.min, self.domain.max, self.packing.radius)[0]
-
-
-# --------------------------------------------------------------------------
-# value readers: each names the key path of what it reads
-class _Reader:
-    def __init__(self, path):
-        self.path = path
-
-    def err(self, key, value, message):
-        raise SceneError(self.path, key, value, message)
-
-    def table(self, parent, name, key, required=False):
-        if name not in parent:
-            if required:
-                self.err(key, None, "missing table")
-            return {}
-        value = parent[name]
-        if not isinstance(value, dict):
-            self.err(key, value, "must be a table")
-        return value
-
-    def known(self, tab, allowed, key):
-        for k in tab:
-            if k not in allowed:
-                where = f"{key}.{k}" if key else k
-                self.err(where, tab[k], f"unknown key (allowed: {', '.join(sorted(allowed))})")
-
-    def number(self, tab, name, key, default=None, positive=False, nonneg=False, lo=None, hi=None, unit=""):
-        if name not in tab:
-            if default is None:
-                self.err(key, None, "missing value")
-            return float(default)
-        return self.check_number(tab[name], key, positive, nonneg, lo, hi, unit)
-
-    def check_number(self, v, key, positive=False, nonneg=False, lo=None, hi=None, unit=""):
-        """`v` as a float: a finite number within the bounds (`unit`, e.g. " m", is named with a bound)."""
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            self.err(key, v, "must be a number")
-        v = float(v)
-        if not math.isfinite(v):
-            self.err(key, v, "must be finite")
-        if positive and v <= 0:
-            self.err(key, v, "must be > 0")
-        if nonneg and v < 0:
-            self.err(key, v, "must be >= 0")
-        if lo is not None and v < lo:
-            self.err(key, v, f"must be >= {lo:g}{unit}" if unit else f"must be >= {lo}")
-        if hi is not None and v > hi:
-            self.err(key, v, f"must be <= {hi:g}{unit}" if unit else f"must be <= {hi}")
-        return v
-
-    def vector(self, tab, name, key, n=3, default=None, lo=None, hi=None, unit=""):
-        if name not in tab:
-            if default is None:
-                self.err(key, None, "missing value")
-            return np.asarray(default, float)
-        v = tab[name]
-        if not isinstance(v, list) or len(v) != n:
-            self.err(key, v, f"must be a list of {n} numbers")
-        return np.array([self.check_number(x, f"{key}[{i}]", lo=lo, hi=hi, unit=unit) for i, x in enumerate(v)],
-                        float)
-
-    def matrix(self, tab, name, key, ncol, integer=False, lo=None, hi=None, unit=""):
-        v = tab[name]
-        if not isinstance(v, list) or not v:
-            self.err(key, v, f"must be a non-empty list of [{', '.join('abc'[:ncol])}] rows")
-        out = np.empty((len(v), ncol), np.int64 if integer else float)
-        for i, row in enumerate(v):
-            if not isinstance(row, list) or len(row) != ncol:
-                self.err(f"{key}[{i}]", row, f"must be a list of {ncol} numbers")
-            for c, x in enumerate(row):
-                if integer:
-                    if isinstance(x, bool) or not isinstance(x, int):
-                        self.err(f"{key}[{i}]", row, "indices must be integers")
-                    out[i, c] = x
-                else:
-                    out[i, c] = self.check_number(x, f"{key}[{i}]", lo=lo, hi=hi, unit=unit)
-        return out
-
-    def choice(self, tab, name, key, choices, default):
-        v = tab.get(name, default)
-        if v not in choices:
-            self.err(key, v, f"must be one of {', '.join(repr(c) for c in choices)}")
-        return v
-
-    def boolean(self, tab, name, key, default):
-        v = tab.get(name, default)
-        if not isinstance(v, bool):
-            self.err(key, v, "must be true or false")
-        return v
-
-    def string(self, tab, name, key, default):
-        v = tab.get(name, default)
-        if not isinstance(v, str):
-            self.err(key, v, "must be a string")
-        return v
-
-    def value(self, tab, name, key, default, kind="value"):
-        """`tab[name]` or `default`, checked by the caller (`kind` names what it must be, for docs/scenes.md)."""
-        return tab.get(name, default)
 
 
 TOP_KEYS = {"name", "description", "domain", "packing", "excavation", "discontinuity", "bonds", "output", "render"}
@@ -245,22 +143,15 @@ def read_limits(rd, data, allowed=LIMIT_KEYS):
 def load_scene(path) -> Scene:
     """Read and validate a scene file; raise SceneError on any problem."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(path, "(file)", str(path), f"cannot read scene file ({exc.__class__.__name__})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(path, "(toml)", str(exc).split("\n")[0], "not valid TOML") from None
+    data, text = read_toml(path)
     return scene_from_dict(data, path, text)
 
 
 def scene_from_dict(data: dict, path="<scene>", text="", reader=None) -> Scene:
-    """The validated Scene of a parsed scene file; `reader(path)` makes the value reader (default _Reader;
-    sgim/scenedoc.py passes one that records what is read)."""
+    """The validated Scene of a parsed scene file; `reader(path)` makes the value reader (default
+    sgim.reader.SceneReader; sgim/scenedoc.py passes one that records what is read)."""
     path = Path(path)
-    rd = (reader or _Reader)(path)
+    rd = (reader or SceneReader)(path)
     rd.known(data, TOP_KEYS, "")
     name = rd.string(data, "name", "name", path.stem)
 
@@ -281,7 +172,7 @@ def scene_from_dict(data: dict, path="<scene>", text="", reader=None) -> Scene:
         packing = Packing("random", radius, spec)
     else:
         rd.known(pk, {"kind", "radius"}, "packing")
-        kind = rd.choice(pk, "kind", "packing.kind", PACKING_KINDS, "cubic")
+        kind = rd.choice(pk, "kind", "packing.kind", PACKING_KINDS, DEFAULTS["packing.kind"])
         radius = rd.number(pk, "radius", "packing.radius", positive=True, **SIZE)
         if 2 * radius > float(np.min(hi - lo)):
             rd.err("packing.radius", radius, f"spheres of diameter {2 * radius:g} do not fit in the domain")
@@ -308,13 +199,14 @@ def scene_from_dict(data: dict, path="<scene>", text="", reader=None) -> Scene:
     bt = rd.table(data, "bonds", "bonds")
     rd.known(bt, {"rule", "tolerance"}, "bonds")
     bonds = Bonds(
-        rule=rd.choice(bt, "rule", "bonds.rule", BOND_RULES, "colour"),
-        tolerance=rd.number(bt, "tolerance", "bonds.tolerance", default=1e-3, nonneg=True, hi=0.2),
+        rule=rd.choice(bt, "rule", "bonds.rule", BOND_RULES, DEFAULTS["bonds.rule"]),
+        tolerance=rd.number(bt, "tolerance", "bonds.tolerance", default=DEFAULTS["bonds.tolerance"], nonneg=True,
+                            hi=0.2),
     )
 
     ot = rd.table(data, "output", "output")
     rd.known(ot, {"formats"}, "output")
-    formats = rd.value(ot, "formats", "output.formats", list(OUTPUT_FORMATS), "list of strings")
+    formats = rd.value(ot, "formats", "output.formats", list(DEFAULTS["output.formats"]), "list of strings")
     if not isinstance(formats, list) or any(f not in OUTPUT_FORMATS for f in formats):
         rd.err("output.formats", formats, f"must be a list drawn from {', '.join(OUTPUT_FORMATS)}")
     if "npz" not in formats:
@@ -322,7 +214,7 @@ def scene_from_dict(data: dict, path="<scene>", text="", reader=None) -> Scene:
 
     rt = rd.table(data, "render", "render")
     rd.known(rt, {"hide_intact", "translucent", "cut_away", "width", "height"}, "render")
-    cut = rd.value(rt, "cut_away", "render.cut_away", [], "string or list of strings")
+    cut = rd.value(rt, "cut_away", "render.cut_away", list(DEFAULTS["render.cut_away"]), "string or list of strings")
     if isinstance(cut, str):
         cut = [cut]
     if not isinstance(cut, list):
@@ -333,11 +225,11 @@ def scene_from_dict(data: dict, path="<scene>", text="", reader=None) -> Scene:
         except ValueError as exc:
             rd.err("render.cut_away", c, str(exc))
     render = Render(
-        hide_intact=rd.boolean(rt, "hide_intact", "render.hide_intact", False),
-        translucent=rd.boolean(rt, "translucent", "render.translucent", False),
+        hide_intact=rd.boolean(rt, "hide_intact", "render.hide_intact", DEFAULTS["render.hide_intact"]),
+        translucent=rd.boolean(rt, "translucent", "render.translucent", DEFAULTS["render.translucent"]),
         cut_away=cut,
-        width=int(rd.number(rt, "width", "render.width", default=1600, lo=64, hi=8000)),
-        height=int(rd.number(rt, "height", "render.height", default=1100, lo=64, hi=8000)),
+        width=int(rd.number(rt, "width", "render.width", default=DEFAULTS["render.width"], lo=64, hi=8000)),
+        height=int(rd.number(rt, "height", "render.height", default=DEFAULTS["render.height"], lo=64, hi=8000)),
     )
     scene = Scene(path, text, name, domain, packing, excavations, discs, bonds, tuple(formats), render)
     scene.limits = read_limits(rd, data)
@@ -378,7 +270,7 @@ def _read_surface(rd, ex, key, domain, scene_path):
         rd.err(key, ex, "must be a table")
     rd.known(ex, {"name", "vertices", "faces", "points", "file", "rule"}, key)
     name = rd.string(ex, "name", f"{key}.name", key)
-    rule = rd.choice(ex, "rule", f"{key}.rule", EXCAVATION_RULES, "paper")
+    rule = rd.choice(ex, "rule", f"{key}.rule", EXCAVATION_RULES, DEFAULTS["excavation[].rule"])
     forms = [f for f in ("vertices", "points", "file") if f in ex]
     if len(forms) != 1:
         rd.err(key, sorted(ex), "give exactly one of: vertices+faces, points, file")
@@ -448,7 +340,8 @@ def _read_disc(rd, dt, key, domain, r):
         dd = rd.number(dt, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
         normal = dip_to_normal(dip, dd)
     radius = rd.number(dt, "radius", f"{key}.radius", positive=True, **SIZE)
-    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True, **LENGTH)
+    thick = rd.number(dt, "thickness", f"{key}.thickness", default=DEFAULTS["discontinuity[].thickness"], nonneg=True,
+                      **LENGTH)
     band = max(thick / 2, 2 * r) + radius
     if np.any(centre + band < domain.min) or np.any(centre - band > domain.max):
         rd.err(f"{key}.centre", centre.tolist(), "discontinuity lies entirely outside the domain box")
@@ -483,20 +376,11 @@ class SurfaceDiscontinuity:
     params: dict = field(default_factory=dict)
 
 
-def _integer(rd, tab, name, key, default, lo, hi):
-    v = rd.number(tab, name, key, default=default, lo=lo, hi=hi)
-    if not float(v).is_integer():
-        rd.err(key, tab.get(name), "must be an integer")
-    return int(v)
-
-
 def _mesh_from_table(rd, tab, key, scene_path, shape_keys, build_shape):
     """Vertices and faces from exactly one of: shape (+ its keys), file, vertices + faces.
 
     Returns (vertices, faces, source, face_key, params); face_key names faces in messages.
     """
-    from .shapes import ShapeError
-
     forms = [f for f in SURFACE_FORMS if f in tab]
     if len(forms) != 1:
         rd.err(key, sorted(tab), "give exactly one of: shape, file, vertices+faces")
@@ -559,7 +443,6 @@ def _trimesh_or_error(rd, verts, faces, face_key):
 
 
 def _read_cavity(rd, ct, key, domain, scene_path):
-    from . import shapes
     from .cavities import Cavity
 
     if not isinstance(ct, dict):
@@ -569,7 +452,8 @@ def _read_cavity(rd, ct, key, domain, scene_path):
     name = rd.string(ct, "name", f"{key}.name", key)
 
     def build(shape):
-        seg = 48 if shape == "box" else _integer(rd, ct, "segments", f"{key}.segments", 48, 8, 4096)
+        seg = DEFAULTS["cavity[].segments"] if shape == "box" else \
+            rd.integer(ct, "segments", f"{key}.segments", DEFAULTS["cavity[].segments"], 8, 4096)
         if shape in ("circular_tunnel", "horseshoe_tunnel"):
             path = _read_path(rd, ct, f"{key}.path")
             if shape == "circular_tunnel":
@@ -615,13 +499,13 @@ def _read_cavity(rd, ct, key, domain, scene_path):
 
 
 def _read_surface_discontinuity(rd, dt, key, domain, r, scene_path):
-    from . import shapes
     from .meshquery import TriMesh
 
     allowed = {"name", "thickness", "faces", *SURFACE_FORMS, *set().union(*_SURFACE_SHAPE_KEYS.values())}
     rd.known(dt, allowed, key)
     name = rd.string(dt, "name", f"{key}.name", key)
-    thick = rd.number(dt, "thickness", f"{key}.thickness", default=0.0, nonneg=True, **LENGTH)
+    thick = rd.number(dt, "thickness", f"{key}.thickness", default=DEFAULTS["discontinuity[].thickness"], nonneg=True,
+                      **LENGTH)
 
     def build(shape):
         trace = rd.vector(dt, "trace", f"{key}.trace", **COORD)

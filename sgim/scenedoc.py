@@ -1,6 +1,6 @@
 """The scene-key reference (docs/scenes.md), recorded from the validating reader.
 
-A :class:`Record` reads scenes through a subclass of :class:`sgim.scene._Reader` that notes every table the reader
+A :class:`Record` reads scenes through a subclass of :class:`sgim.reader.SceneReader` that notes every table the reader
 allows (``known``) and, for every key read through the reader's methods, its type, default, range and unit.  Which
 keys are required is found by reading each synthetic scene again without the key: a key is required when the reader
 then stops at that key.  What the reader cannot say (the unit of a key it reads without one, and a one-line
@@ -15,9 +15,12 @@ from __future__ import annotations
 import copy
 import math
 import re
+import tomllib
 from pathlib import Path
 
-from .scene import SceneError, _Reader
+from .common import SceneError
+from .reader import SceneReader
+from .scene import scene_from_dict
 
 NODEFAULT = "<none>"  # the reader was given no default
 
@@ -118,7 +121,7 @@ class Record:
             self._tried.add(context)
             del parent[where[-1]]
             try:
-                scene_from_dict(trimmed, path, "", reader=_Reader)
+                scene_from_dict(trimmed, path, "", reader=SceneReader)
             except SceneError as exc:
                 self.required.setdefault(name, set()).add(norm(exc.key) == name)
             else:
@@ -142,7 +145,7 @@ def _key_paths(data, prefix=()):
                 yield from _key_paths(t, prefix + (k, i))
 
 
-class _Recorder(_Reader):
+class _Recorder(SceneReader):
     """The scene reader, noting what it allows and reads into a Record."""
 
     def __init__(self, path, record):
@@ -425,10 +428,6 @@ def sgim_scenes():
 def record_sgim(record, folder, case_files=(), synthetic=True):
     """Record the sgim reader over the synthetic scenes (mesh files written into `folder`; each also read
     without each of its keys; not when `synthetic` is false) and over `case_files` (sgim scene files)."""
-    import tomllib
-
-    from .scene import scene_from_dict
-
     write_scene_files(folder)
     for name, data in (sgim_scenes() if synthetic else {}).items():
         record.read(scene_from_dict, data, Path(folder) / f"{name}.toml", required=True)

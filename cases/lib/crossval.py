@@ -513,7 +513,7 @@ def main(argv=None):
               f"{', '.join(ENGINES)})", file=sys.stderr)
         return 2
     from adapters.process import EngineError
-    from sgim.cli import _progress
+    from sgim.common import progress_printer as _progress
 
     say = _progress(args.quiet)
     try:

@@ -100,7 +100,7 @@ class Evaluator:
 
 
 def _read_toml(path):
-    from sgim.scene import SceneError
+    from sgim.common import SceneError
 
     path = Path(path)
     try:
@@ -129,7 +129,7 @@ def wedge_inputs(path):
     """The wedge of a DDA scene with ``[[generate]] kind = "wedge"``: a dict of joint_a, joint_b, face, top
     (dip, dip direction), height (m), friction (deg), cohesion (Pa), density (kg/m^3), g (m/s^2),
     unit_weight (N/m^3), kn, damping, safety, duration (None where the scene does not say)."""
-    from sgim.scene import SceneError
+    from sgim.common import SceneError
 
     data = _read_toml(path)
     gens = [(k, g) for k, g in enumerate(data.get("generate", []) or []) if isinstance(g, dict)
@@ -212,7 +212,7 @@ def wedge_dda(scene_path, case_dir, params):
     """DDA critical friction and factor of safety of the scene's wedge next to Hoek & Bray's."""
     from dda import hoekbray
     from dda.wedge import WedgeModel, dda_critical_friction
-    from sgim.scene import SceneError
+    from sgim.common import SceneError
 
     w = wedge_inputs(scene_path)
     if w["cohesion"] != 0.0:

@@ -60,8 +60,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.cli import EXIT_BAD_INPUT, CliError, _progress, run_command
-from sgim.scene import SceneError
+from sgim.common import EXIT_BAD_INPUT, CliError, SceneError, run_command
+from sgim.common import progress_printer as _progress
 
 from .evaluators import BUILTIN, Evaluator, _as_evaluator, _noop, _sleep, _spin, module_file, registry, \
     resolve_evaluator  # noqa: F401 - re-exported
