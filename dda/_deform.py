@@ -30,6 +30,7 @@ from numba import njit
 
 from sgim.portable import cholesky, eigvalsh, inv, matmul
 
+from ._kinematics import quat_matrix
 from .polyhedra import mass_properties
 
 
@@ -225,27 +226,16 @@ def add_strain_force(i, X, R, f, sign, qs):
 
 
 @njit(cache=True)
-def _qmat(q, R):
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    R[0, 0] = 1 - 2 * (y * y + z * z)
-    R[0, 1] = 2 * (x * y - w * z)
-    R[0, 2] = 2 * (x * z + w * y)
-    R[1, 0] = 2 * (x * y + w * z)
-    R[1, 1] = 1 - 2 * (x * x + z * z)
-    R[1, 2] = 2 * (y * z - w * x)
-    R[2, 0] = 2 * (x * z - w * y)
-    R[2, 1] = 2 * (y * z + w * x)
-    R[2, 2] = 1 - 2 * (x * x + y * y)
-
-
-@njit(cache=True)
-def deform_step(i, dt, dtavg, gravity, local_damp, pos, vel, quat, mass, inertia, force, torque, bforce,
-                pl_start, pl_r, pl_f, strain, srate, wb, qs, m9, m9inv, vc):
-    """Central-difference step of deformable block i (forces of this step in force / torque (world) and qs
-    (strain part of T^T f)). Returns (kinetic energy (product form), load potential, strain energy, local
-    damping work, blown)."""
+def deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces):
+    """Central-difference step of deformable block i (bundles of dda/_state.py; forces of this step in
+    forces.force / torque (world) and qs (strain part of T^T f)). Returns (kinetic energy (product form), load
+    potential, strain energy, local damping work, blown)."""
+    pos, vel, quat, mass, inertia = blocks.pos, blocks.vel, blocks.quat, blocks.mass, blocks.inertia
+    force, torque, qs = forces.force, forces.torque, forces.qs
+    gravity, bforce, pl_start, pl_r, pl_f = loads.gravity, loads.bforce, loads.pl_start, loads.pl_r, loads.pl_f
+    strain, srate, wb, m9, m9inv, vc = deform.strain, deform.srate, deform.wb, deform.m9, deform.m9inv, deform.vc
     R = np.empty((3, 3))
-    _qmat(quat[i], R)
+    quat_matrix(quat[i], R)
     F = np.empty((3, 3))
     strain_tensor(strain[i], F)
     for a in range(3):

@@ -277,16 +277,104 @@ def _crease_covered(vert, fnw, fdw, p, x0, x1, n, f0, f1, tol, lat, sgn, overlap
 
 
 @njit(cache=True)
-def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
-                   va0, va1, fa0, fa1, ea0, ea1, vb0, vb1, fb0, fb1, eb0, eb1,
-                   n, sa, sb, keep_gap, size, nhe,
-                   out_pos, out_depth, out_id, scr=None, iscr=None):
-    """Contact points of blocks A and B for the common-plane normal n (A -> B).
+def _edge_crossing(vert, he_origin, he_next, scr, na, va0, vb0, ha, hb, P):
+    """Where edge ha of A crosses edge hb of B seen along n (2D segment intersection in the plane, coordinates
+    in scr) into P; False when they do not cross."""
+    pa = he_origin[ha] - va0
+    qa = he_origin[he_next[ha]] - va0
+    pb = na + he_origin[hb] - vb0
+    qb = na + he_origin[he_next[hb]] - vb0
+    x1 = scr[pa, 1]
+    y1 = scr[pa, 2]
+    dx1 = scr[qa, 1] - x1
+    dy1 = scr[qa, 2] - y1
+    x2 = scr[pb, 1]
+    y2 = scr[pb, 2]
+    dx2 = scr[qb, 1] - x2
+    dy2 = scr[qb, 2] - y2
+    den = dx1 * dy2 - dy1 * dx2
+    l1 = np.sqrt(dx1 * dx1 + dy1 * dy1)
+    l2 = np.sqrt(dx2 * dx2 + dy2 * dy2)
+    if abs(den) <= 1e-9 * l1 * l2 or l1 == 0.0 or l2 == 0.0:
+        return False
+    rx = x2 - x1
+    ry = y2 - y1
+    t = (rx * dy2 - ry * dx2) / den
+    u = (rx * dy1 - ry * dx1) / den
+    if t < 0.0 or t > 1.0 or u < 0.0 or u > 1.0:
+        return False
+    ga = he_origin[ha]
+    gq = he_origin[he_next[ha]]
+    for j in range(3):
+        P[j] = vert[ga, j] + t * (vert[gq, j] - vert[ga, j])
+    return True
+
+
+@njit(cache=True)
+def _crossing_covered(vert, fnw, fdw, he_origin, he_next, ha, hb, n, fa0, fa1, fb0, fb1, tol, lat, overlap):
+    """A crossing of edges ha (A) and hb (B) next to a vertex that bears by the crease rule is that vertex's
+    contact."""
+    ga = he_origin[ha]
+    gq = he_origin[he_next[ha]]
+    gb = he_origin[hb]
+    gr = he_origin[he_next[hb]]
+    return (_crease_covered(vert, fnw, fdw, vert[ga], vert[gb], vert[gr], n, fb0, fb1, tol, lat, -1.0, overlap)
+            or _crease_covered(vert, fnw, fdw, vert[gq], vert[gb], vert[gr], n, fb0, fb1, tol, lat, -1.0, overlap)
+            or _crease_covered(vert, fnw, fdw, vert[gb], vert[ga], vert[gq], n, fa0, fa1, tol, lat, 1.0, overlap)
+            or _crease_covered(vert, fnw, fdw, vert[gr], vert[ga], vert[gq], n, fa0, fa1, tol, lat, 1.0, overlap))
+
+
+@njit(cache=True)
+def _keep_point(P, n, e1, e2, depth, mid, cid, merge, lat, k, cu, cv, out_pos, out_depth, out_id):
+    """Store the candidate P (depth, id cid) unless a stored point lies within `merge` in the plane and is as
+    deep (a deeper one replaces it; when full, it replaces the shallowest point if deeper); returns the count."""
+    maxp = out_depth.shape[0]
+    u2 = _dot(P, e1)
+    v2 = _dot(P, e2)
+    dup = -1
+    for j in range(k):
+        if abs(cu[j] - u2) < merge and abs(cv[j] - v2) < merge:
+            dup = j
+            break
+    slot = k
+    if dup >= 0:
+        if depth <= out_depth[dup] + 0.01 * lat:
+            if cid < out_id[dup] and cid > 0:
+                out_id[dup] = cid
+            return k
+        slot = dup  # a clearly deeper candidate at the same place replaces the stored one
+    elif k == maxp:
+        # full: replace the shallowest point if this one is deeper
+        slot = 0
+        for j in range(1, maxp):
+            if out_depth[j] < out_depth[slot]:
+                slot = j
+        if out_depth[slot] >= depth:
+            return k
+    else:
+        k += 1
+    cu[slot] = u2
+    cv[slot] = v2
+    out_depth[slot] = depth
+    out_id[slot] = cid
+    for j in range(3):
+        out_pos[slot, j] = P[j] + mid * n[j]
+    return k
+
+
+@njit(cache=True)
+def contact_points(geom, i, j, n, sa, sb, keep_gap, size, out_pos, out_depth, out_id, scr=None, iscr=None):
+    """Contact points of blocks A = i and B = j (geom: dda._state.Geometry) for the common-plane normal n (A -> B).
 
     sa = max_A x.n and sb = min_B x.n (from fcp). Points whose depth exceeds -keep_gap are returned
     (keep_gap > 0 keeps slightly open points, for bonded contacts). Returns the count, or -1 when the blocks
     overlap along n but no candidate lies inside the other block. `scr` (>= nA + nB rows, 3 columns) and `iscr`
     (>= edges of A + edges of B) are optional scratch arrays (allocated when not given)."""
+    vert, fnw, fdw = geom.vert, geom.fnw, geom.fdw
+    he_origin, he_next, edge_he = geom.he_origin, geom.he_next, geom.edge_he
+    va0, va1, fa0, fa1, ea0, ea1 = geom.vs[i], geom.vs[i + 1], geom.fs[i], geom.fs[i + 1], geom.es[i], geom.es[i + 1]
+    vb0, vb1, fb0, fb1, eb0, eb1 = geom.vs[j], geom.vs[j + 1], geom.fs[j], geom.fs[j + 1], geom.es[j], geom.es[j + 1]
+    nhe = he_origin.shape[0]
     tol = 1e-9 * size
     merge = 1e-7 * size
     # tangent basis
@@ -352,37 +440,10 @@ def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
         else:
             m = c - na - nb
             ia = m // nB
-            ib = m - ia * nB
             ha = iscr[ia]
-            hb = iscr[nA + ib]
-            pa = he_origin[ha] - va0
-            qa = he_origin[he_next[ha]] - va0
-            pb = na + he_origin[hb] - vb0
-            qb = na + he_origin[he_next[hb]] - vb0
-            # 2D segment intersection in the (e1, e2) plane
-            x1 = scr[pa, 1]
-            y1 = scr[pa, 2]
-            dx1 = scr[qa, 1] - x1
-            dy1 = scr[qa, 2] - y1
-            x2 = scr[pb, 1]
-            y2 = scr[pb, 2]
-            dx2 = scr[qb, 1] - x2
-            dy2 = scr[qb, 2] - y2
-            den = dx1 * dy2 - dy1 * dx2
-            l1 = np.sqrt(dx1 * dx1 + dy1 * dy1)
-            l2 = np.sqrt(dx2 * dx2 + dy2 * dy2)
-            if abs(den) <= 1e-9 * l1 * l2 or l1 == 0.0 or l2 == 0.0:
+            hb = iscr[nA + m - ia * nB]
+            if not _edge_crossing(vert, he_origin, he_next, scr, na, va0, vb0, ha, hb, P):
                 continue
-            rx = x2 - x1
-            ry = y2 - y1
-            t = (rx * dy2 - ry * dx2) / den
-            u = (rx * dy1 - ry * dx1) / den
-            if t < 0.0 or t > 1.0 or u < 0.0 or u > 1.0:
-                continue
-            ga = he_origin[ha]
-            gq = he_origin[he_next[ha]]
-            for j in range(3):
-                P[j] = vert[ga, j] + t * (vert[gq, j] - vert[ga, j])
             cid = -(1 + ha * nhe + hb)
         if c < na or c >= na + nb:
             # a point of A's surface: its penetration is B's extent behind it along -n
@@ -411,50 +472,10 @@ def contact_points(vert, fnw, fdw, he_origin, he_next, edge_he,
             m = c - na - nb
             ha = iscr[m // nB]
             hb = iscr[nA + m - (m // nB) * nB]
-            ga = he_origin[ha]
-            gq = he_origin[he_next[ha]]
-            gb = he_origin[hb]
-            gr = he_origin[he_next[hb]]
-            if (_crease_covered(vert, fnw, fdw, vert[ga], vert[gb], vert[gr], n, fb0, fb1, tol, lat, -1.0, sa - sb)
-                    or _crease_covered(vert, fnw, fdw, vert[gq], vert[gb], vert[gr], n, fb0, fb1, tol, lat, -1.0,
-                                       sa - sb)
-                    or _crease_covered(vert, fnw, fdw, vert[gb], vert[ga], vert[gq], n, fa0, fa1, tol, lat, 1.0,
-                                       sa - sb)
-                    or _crease_covered(vert, fnw, fdw, vert[gr], vert[ga], vert[gq], n, fa0, fa1, tol, lat, 1.0,
-                                       sa - sb)):
+            if _crossing_covered(vert, fnw, fdw, he_origin, he_next, ha, hb, n, fa0, fa1, fb0, fb1, tol, lat,
+                                 sa - sb):
                 continue
-        u2 = _dot(P, e1)
-        v2 = _dot(P, e2)
-        dup = -1
-        for j in range(k):
-            if abs(cu[j] - u2) < merge and abs(cv[j] - v2) < merge:
-                dup = j
-                break
-        slot = k
-        if dup >= 0:
-            if depth <= out_depth[dup] + 0.01 * lat:
-                if cid < out_id[dup] and cid > 0:
-                    out_id[dup] = cid
-                continue
-            slot = dup  # a clearly deeper candidate at the same place replaces the stored one
-        if dup >= 0:
-            pass
-        elif k == maxp:
-            # full: replace the shallowest point if this one is deeper
-            slot = 0
-            for j in range(1, maxp):
-                if out_depth[j] < out_depth[slot]:
-                    slot = j
-            if out_depth[slot] >= depth:
-                continue
-        else:
-            k += 1
-        cu[slot] = u2
-        cv[slot] = v2
-        out_depth[slot] = depth
-        out_id[slot] = cid
-        for j in range(3):
-            out_pos[slot, j] = P[j] + mid * n[j]
+        k = _keep_point(P, n, e1, e2, depth, mid, cid, merge, lat, k, cu, cv, out_pos, out_depth, out_id)
     if k == 0 and sb - sa < 0.0:
         return -1  # overlap without a candidate point: caller uses the support points
     return k

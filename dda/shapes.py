@@ -160,7 +160,7 @@ def convex_hull(points, tol: float = 1e-9, **fields) -> BlockSpec:
     face; vertices that end up on a straight edge or inside a face are dropped. ``fields`` are passed to
     BlockSpec (name, fixed, material, ...).
     """
-    from scipy.spatial import ConvexHull, QhullError
+    from scipy.spatial import ConvexHull, QhullError  # lazy: scipy loads only when a hull is built (start-up)
 
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) < 4 or not np.all(np.isfinite(pts)):
@@ -339,7 +339,7 @@ def load_convex_mesh(path, tol: float = 1e-6, **fields) -> BlockSpec:
     cannot be read, has no surface cells, is open (an edge not shared by exactly two faces), is inconsistently
     oriented, or is not convex within ``tol`` times its size. Orientation (all faces inward) is corrected.
     """
-    import meshio
+    import meshio  # lazy: meshio loads only when a mesh file is read (start-up)
 
     path = Path(path)
     if not path.is_file():

@@ -55,14 +55,14 @@ from sgim.portable import det3, matmul, norm
 
 from . import _integrate as _it
 from ._broad import LARGE, build_grid, buckets_for, map_cells, n_cells
+from ._deform import critical_omega2, deform_geometry
 from ._fcp import MAXP
+from ._state import (LAW_KN, LAW_TEN, LAW_ZETA, NENERGY, NLAW, NSTATS, ST_CONTACTS, ST_FCP_ITER, ST_NEED,
+                     ST_POINTS, Blocks, Books, Contacts, Deform, Forces, Geometry, Grid, Law, Lists, Loads, Sleep,
+                     State)
 from .progress import tracker
 from .results import Results
-
-def _quat_to_matrix(q):
-    from .system import quat_to_matrix
-
-    return quat_to_matrix(q)
+from .system import quat_to_matrix
 
 
 def _strain_tensor(e):
@@ -126,7 +126,7 @@ class Simulation:
             raise ValueError("the block system is empty")
         mats = system.materials
         nm = len(mats)
-        tab = np.empty((nm, nm, 6))
+        tab = np.empty((nm, nm, NLAW))
         tab[:, :] = self.law.row()
         for (m1, m2), lw in (pair_laws or {}).items():
             if m1 not in mats or m2 not in mats:
@@ -147,7 +147,7 @@ class Simulation:
         self.wb = np.zeros((nb, 3))
         self.qs = np.zeros((nb, 6))
         for i in np.nonzero(self.dof12)[0]:
-            R = _quat_to_matrix(self.quat[i])
+            R = quat_to_matrix(self.quat[i])
             self.wb[i] = matmul(R.T, self.angmom[i]) / A.inertia[i]
             self.angmom[i] = 0.0
         self.active = np.nonzero(~A.fixed)[0].astype(np.int64)
@@ -176,9 +176,10 @@ class Simulation:
         self.d50 = float(np.median(self.size_b))
         self.S = cell_factor * self.d50
         self.margin = 0.05 * self.S
-        kn_max = float(tab[:, :, 0].max())
+        kn_max = float(tab[:, :, LAW_KN].max())
         area = self.d50 ** 2
-        self.keep_gap = float(np.max(tab[:, :, 4]) * area / kn_max) if np.any(tab[:, :, 4] > 0) else 0.0
+        ten = tab[:, :, LAW_TEN]
+        self.keep_gap = float(np.max(ten) * area / kn_max) if np.any(ten > 0) else 0.0
         self.gap = 0.02 * self.d50 + self.keep_gap
         # grids
         self.cellbox = np.zeros((nb, 6), np.int64)
@@ -203,8 +204,8 @@ class Simulation:
         self.fext = np.zeros((0, 3))
         self.text = np.zeros((0, 3))
         self.qext = np.zeros((0, 6))
-        self.energy = np.zeros(6)
-        self.stats = np.zeros(12)
+        self.energy = np.zeros(NENERGY)
+        self.stats = np.zeros(NSTATS)
         g0 = norm(self.gravity) or 9.81
         v_s = 1e-4 * math.sqrt(g0 * self.d50) if sleep_velocity is None else float(sleep_velocity)
         a_s = 1e-3 * g0 if sleep_accel is None else float(sleep_accel)
@@ -230,11 +231,11 @@ class Simulation:
         A = self.A
         if len(self.free) == 0:
             return 1.0
-        k = NPOINT * float(self.lawtab[:, :, 0].max())
+        k = NPOINT * float(self.lawtab[:, :, LAW_KN].max())
         m = A.mass[self.free]
         imin = A.inertia[self.free].min(1)
         r = A.radius[self.free]
-        zeta = float(self.lawtab[:, :, 5].max())
+        zeta = float(self.lawtab[:, :, LAW_ZETA].max())
         # viscous damping shortens the stable step: dt < 2 / w (sqrt(1 + z^2) - z). The point dampers are
         # sized on the translational mass, so a rotational mode sees the ratio z sqrt(m r^2 / I).
         zr = zeta * np.sqrt(m * r * r / imin)
@@ -243,8 +244,6 @@ class Simulation:
         dt_c = float(min(dt_t.min(), dt_r.min()))
         for i in np.nonzero(self.dof12)[0]:
             # all 12 modes of the block with the contact springs at its farthest vertex
-            from ._deform import critical_omega2
-
             b = self.system.block(int(i))
             w = math.sqrt(critical_omega2(b.vloc, b.faces, b.density, b.E, b.nu, k))
             dt_c = min(dt_c, 2.0 / w * (math.sqrt(1.0 + zeta * zeta) - zeta))
@@ -282,33 +281,50 @@ class Simulation:
                 continue
             getattr(self, k)[:, :cap] = v
 
-    def _chunk(self, nsteps):
+    def bundles(self):
+        """The state as the named bundles of dda/_state.py that the step kernels take (views of this Simulation's
+        arrays, so the kernels advance it): a dda._state.State (blocks, deform, loads, forces, geometry, grid,
+        lists, sleep, contacts, law, books), the order of dda._integrate.run_chunk's arguments after the step
+        parameters."""
         A = self.A
+        return State(
+            Blocks(self.pos, self.vel, self.quat, self.angmom, A.mass, A.inertia, A.fixed, A.kin, A.wpres,
+                   A.material, self.size_b, self.dof12),
+            Deform(self.strain_, self.srate, self.wb, A.m9, A.m9inv, A.vc),
+            Loads(self.gravity, A.bforce, A.pl_start, A.pl_r, A.pl_f, self.fext, self.text, self.qext),
+            Forces(self.force, self.torque, self.qs),
+            Geometry(A.vert_start, A.face_start, A.edge_start, A.vloc, A.nloc, A.dloc, self.vert, self.fnw,
+                     self.fdw, self.aabb, A.he_origin, A.he_next, A.he_pair, A.he_face, A.vert_he, A.edge_he),
+            Grid(self.S, self.margin, self.gap, self.cellbox, self.large, self.stamp, self.tag),
+            Lists(self.active, self.mstart, self.mentries, self.fstart, self.fentries, self.large_list,
+                  self.pa, self.pb),
+            Sleep(self.movable, self.asleep, self.calm, self.pe_sl, self.sleep_par),
+            Contacts(self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np,
+                     self.c_pid, self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth,
+                     self.htab),
+            Law(self.lawtab, self.keep_gap),
+            Books(self.energy, self.acc, self.stats),
+        )
+
+    def set_lists(self, lists):
+        """Take the grids and lists a chunk of steps returns (dda._state.Lists)."""
+        (self.active, self.mstart, self.mentries, self.fstart, self.fentries, self.large_list, self.pa,
+         self.pb) = lists
+
+    def _chunk(self, nsteps):
         while True:
-            (status, done, self.mstart, self.mentries, self.pa, self.pb, self.large_list, self.active,
-             self.fstart, self.fentries) = _it.run_chunk(
-                nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.first_step,
-                self.pos, self.vel, self.quat, self.angmom, A.mass, A.inertia, A.fixed, A.material, self.active,
-                self.movable, A.kin, A.wpres, A.bforce, A.pl_start, A.pl_r, A.pl_f, self.asleep, self.calm,
-                self.pe_sl, self.sleep_par, self.acc,
-                A.vert_start, A.face_start, A.edge_start, A.vloc, A.nloc, A.dloc, self.vert, self.fnw, self.fdw,
-                self.aabb, self.size_b, A.he_origin, A.he_next, A.he_pair, A.he_face, A.vert_he, A.edge_he,
-                self.S, self.cellbox, self.large, self.mstart, self.mentries, self.fstart, self.fentries,
-                self.large_list, self.stamp, self.tag, self.gap, self.margin, self.lawtab, self.keep_gap,
-                self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np, self.c_pid,
-                self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth, self.htab,
-                self.pa, self.pb, self.force, self.torque, self.energy, self.stats,
-                self.dof12, self.strain_, self.srate, self.wb, self.qs, A.m9, A.m9inv, A.vc,
-                self.fext, self.text, self.qext)
+            status, done, lists = _it.run_chunk(nsteps, self.dt, self.dt_prev, self.local_damping, self.first_step,
+                                                *self.bundles())
+            self.set_lists(lists)
             if done:
                 self.first_step = False
                 self.dt_prev = self.dt
             self.steps += done
             self.time += done * self.dt
-            self.fcp_iterations += int(self.stats[3])
+            self.fcp_iterations += int(self.stats[ST_FCP_ITER])
             nsteps -= done
             if status == _it.NEED_CAPACITY:
-                self._grow_contacts(int(self.stats[2]))
+                self._grow_contacts(int(self.stats[ST_NEED]))
                 continue
             return status
 
@@ -371,8 +387,9 @@ class Simulation:
                 if left > 0 and self.steps % rec_steps:
                     continue
             res.record(self)
-            clock.update(self.time, self.steps, f"contacts {int(self.stats[5])}  points {int(self.stats[6])}  "
-                         f"KE {e[0]:.4g} J  balance error {err:.3g} J", end=left == 0)
+            clock.update(self.time, self.steps, f"contacts {int(self.stats[ST_CONTACTS])}  "
+                         f"points {int(self.stats[ST_POINTS])}  KE {e[0]:.4g} J  balance error {err:.3g} J",
+                         end=left == 0)
         res.wall_s = time.perf_counter() - t_wall
         return res
 
@@ -384,8 +401,6 @@ class Simulation:
         return self.vel[i].copy()
 
     def rotation(self, i):
-        from .system import quat_to_matrix
-
         return quat_to_matrix(self.quat[i])
 
     def vertices(self, i):
@@ -405,8 +420,6 @@ class Simulation:
         if not self.dof12[i]:
             raise ValueError(f"block {i} is not a free deformable block (dof = 12)")
         self.strain_[i] = np.asarray(e, float).reshape(6)
-        from ._deform import deform_geometry
-
         deform_geometry(int(i), self.pos, self.rotation(i), self.strain_, self.A.vert_start, self.A.face_start,
                         self.A.vloc, self.A.nloc, self.A.dloc, self.vert, self.fnw, self.fdw, self.aabb)
 

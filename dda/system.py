@@ -142,7 +142,7 @@ class BlockSystem:
         if blk.prescribed and dof == 12:
             raise ValueError(f"block {name!r}: a deformable block (dof = 12) cannot be prescribed")
         if dof == 12:
-            from ._deform import block_matrices
+            from ._deform import block_matrices  # lazy: dda._deform loads numba, rigid-only systems never need it
 
             blk.mats = block_matrices(vloc, faces, density, E, nu)
         self._blocks.append(blk)

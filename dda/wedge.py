@@ -35,10 +35,11 @@ import time
 
 import numpy as np
 
-from sgim.cli import EXIT_BAD_INPUT
+from sgim.common import EXIT_BAD_INPUT, SceneError
 from sgim.portable import matmul, norm
 
 from . import hoekbray
+from .limits import check
 
 G = 9.81
 
@@ -120,6 +121,8 @@ class WedgeModel:
     def __init__(self, joint_a, joint_b, face, top=(0.0, 0.0), height=10.0, unit_weight=25.506, kn=None,
                  penetration=1e-5, duration=1.5, resolution=1e-3, damping=0.3, safety=0.25, settle=0.5,
                  settle_friction=60.0):
+        # lazy: dda.generate (scipy) and the block engine (numba) load only when a wedge is modelled, so that
+        # `dda wedge --help` and the analytical-only answer start fast
         from .generate import wedge as wedge_blocks
 
         self.geom = hoekbray.wedge_fs(joint_a, joint_b, face, top=top, friction=30.0, unit_weight=unit_weight,
@@ -156,7 +159,7 @@ class WedgeModel:
 
     def _fresh(self):
         """The wedge's Simulation before settling."""
-        from .simulation import ContactLaw, Simulation
+        from .simulation import ContactLaw, Simulation  # lazy (numba), as above
         from .system import BlockSystem
 
         bs = BlockSystem()
@@ -169,10 +172,6 @@ class WedgeModel:
         """Refuse (WedgeInputError, one line) a trial or the settling run whose steps pass the limit
         (`max_steps`, the --max-steps value, default dda.limits.DEFAULT_MAX_STEPS), before anything runs.
         `kn_given`: kn came from --kn (else from --penetration, which the message then names)."""
-        from sgim.scene import SceneError
-
-        from .limits import check
-
         sim = self._fresh()
         key, value, fix = ("--kn", self.kn, None) if kn_given else ("--penetration", self.penetration,
                                                                      "raise --penetration")
@@ -295,7 +294,7 @@ def run_wedge(args) -> int:
         def say(msg):
             print(f"[{time.perf_counter() - t0:7.2f} s] {msg}", file=sys.stderr, flush=True)
 
-        from .simulation import BlowUpError
+        from .simulation import BlowUpError  # lazy: loads numba, not needed for the analytical answer
 
         try:
             out.update(dda_critical_friction(ja, jb, face, top, args.height, args.friction, args.unit_weight,

@@ -118,12 +118,8 @@ def job_fcp(work: Path):
         bs.add_block(BlockSpec(vb - (g + 0.01) * nrm, fb))
         sim = Simulation(bs, gravity=(0, 0, 0), dt=1e-3)
         g, nrm, sa, sb, it = _fcp(sim, nrm)
-        A = sim.A
         pos, dep, ids = np.zeros((MAXP, 3)), np.zeros(MAXP), np.zeros(MAXP, np.int64)
-        k = contact_points(sim.vert, sim.fnw, sim.fdw, A.he_origin, A.he_next, A.edge_he,
-                           A.vert_start[0], A.vert_start[1], A.face_start[0], A.face_start[1], A.edge_start[0],
-                           A.edge_start[1], A.vert_start[1], A.vert_start[2], A.face_start[1], A.face_start[2],
-                           A.edge_start[1], A.edge_start[2], nrm, sa, sb, 0.0, 1.0, len(A.he_origin), pos, dep, ids)
+        k = contact_points(sim.bundles().geometry, 0, 1, nrm, sa, sb, 0.0, 1.0, pos, dep, ids)
         out += [np.array([g, sa, sb, k]), nrm, pos, dep, ids]
     print("fcp", _hash(*out))
 

@@ -175,10 +175,7 @@ def test_contact_points_of_a_shallow_overlap():
         pos = np.zeros((MAXP, 3))
         dep = np.zeros(MAXP)
         ids = np.zeros(MAXP, np.int64)
-        k = contact_points(sim.vert, sim.fnw, sim.fdw, A.he_origin, A.he_next, A.edge_he,
-                           A.vert_start[0], A.vert_start[1], A.face_start[0], A.face_start[1], A.edge_start[0],
-                           A.edge_start[1], A.vert_start[1], A.vert_start[2], A.face_start[1], A.face_start[2],
-                           A.edge_start[1], A.edge_start[2], nrm, sa, sb, 0.0, 1.0, len(A.he_origin), pos, dep, ids)
+        k = contact_points(sim.bundles().geometry, 0, 1, nrm, sa, sb, 0.0, 1.0, pos, dep, ids)
         if k == -1:  # tip against tip: no feature inside the other block, the caller uses the support points
             fallback += 1
             continue
@@ -246,10 +243,7 @@ def test_a_vertex_in_a_crease_bears_on_both_blocks(alpha_deg, d1, d2):
         pos = np.zeros((MAXP, 3))
         dep = np.zeros(MAXP)
         ids = np.zeros(MAXP, np.int64)
-        k = contact_points(sim.vert, sim.fnw, sim.fdw, A.he_origin, A.he_next, A.edge_he,
-                           vs[i], vs[i + 1], fs[i], fs[i + 1], es[i], es[i + 1],
-                           vs[w], vs[w + 1], fs[w], fs[w + 1], es[w], es[w + 1],
-                           out, sa, sb, 0.0, 1.0, len(A.he_origin), pos, dep, ids)
+        k = contact_points(sim.bundles().geometry, i, w, out, sa, sb, 0.0, 1.0, pos, dep, ids)
         assert k == 4  # the corners only: an edge crossing next to a crease corner is that corner's contact
         assert np.allclose(dep[:k], d, rtol=1e-6)
         # the corners of the prism's face on this wall (brute force: the prism's vertices at depth d below it)
