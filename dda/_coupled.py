@@ -6,16 +6,19 @@ narrow phase, sleeping-free fast path and bit-identical results when no sphere i
 never returns to Python between steps). One coupled step i:
 
 1. world geometry of the moving blocks at x(i) (as run_chunk computes it);
-2. ``sphere_forces``: hashed sphere grid (cells of the largest sphere diameter, counting sort, linear in the
-   spheres), sphere-sphere contacts without an intact bond, smooth joints (dda/_spheres.py ``_joints``),
-   sphere-block contacts and bonds. Sphere-block candidates come from the block engine's own grids (moving blocks, static blocks, short list of large
-   blocks): each sphere looks up the cells its box covers, so the cost follows the spheres and the blocks
+2. ``sphere_forces``: ``grid_contacts``, a hashed sphere grid (cells of the largest sphere diameter,
+   counting sort, linear in the spheres) and the sphere-sphere contacts without an intact bond, the
+   sphere-block contacts (``block_contacts``), smooth joints and bonds (dda/_spheres.py ``_joints``, the one
+   bond law of dda/_bondlaw.py, as in sphere-only runs). Sphere-block candidates come from the block engine's
+   own grids (moving blocks, static blocks, short list of large blocks): each sphere looks up the cells its box covers, so the cost follows the spheres and the blocks
    near them, never spheres x blocks. A sphere touches a block at the closest point of the convex polyhedron
    (face, edge or vertex); the block contact law acts at that point; the block takes the reaction there
    (force, torque about its centroid and, for a deformable block, the strain part T^T f) in ``fext``,
    ``text``, ``qext``;
 3. ``run_chunk(1 step)``: block-block contacts plus the reactions, central difference of the blocks;
-4. ``sphere_update``: central difference of the spheres (the same half-step scheme).
+4. dda/_spheres.py ``integrate``: central difference of the spheres (the same half-step scheme).
+The spheres travel in the bundles of dda/_sphere_state.py, the blocks in the block engine's (dda/_state.py).
+The sphere grid is searched every step here (no Verlet list: the blocks' grids move with the blocks).
 Energy: the spheres' terms (kinetic, potential, elastic of sphere contacts and bonds, dissipated) here, the
 blocks' in the block engine's array; their sum is the balance.
 """
@@ -24,37 +27,33 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._bondlaw import bond_forces, bond_lookup, sync_central
 from ._broad import _hash
 from ._contact import point_force
 from ._deform import add_strain_force, body_point, deform_geometry, point_velocity
-from ._integrate import _omega, quat_matrix, run_chunk, update_geometry
-from ._spheres import (_cell_hash, _contact, _hkey, _joints, advance_sphere, bond_lookup, closest_on_polyhedron,
-                       hashed_cells, pair_meff)
+from ._integrate import run_chunk, update_geometry
+from ._kinematics import omega as _omega
+from ._kinematics import quat_matrix
+from ._sphere_state import (LAW_KN, LAW_KS, LAW_TANPHI, LAW_ZETA, R_BOND, ST_BONDS, ST_BROKEN, ST_CONTACTS,
+                            ST_JOINTS, ST_NEED, ST_WALL)
+from ._spheres import (_cell_hash, _joints, book_energy, carry_shear, clear_forces, closest_on_polyhedron,
+                       contact_normal, hashed_cells, history_hash, integrate, record_contact, sphere_pair)
+from ._state import ST_FCP_ITER
 
 OK, NEED_CAPACITY, BLOWUP, NEED_BLOCK_CAPACITY = 0, 1, 2, 3
 
 
 @njit(cache=True)
-def _block_contact(b, j, key, depth, n, p, x, v, w, m, sstatic, lawrow, dt,
-                   bpos, bvel, bquat, bangmom, bmass, binertia, bstatic, bkin, bwpres, bdof12, bstrain, bsrate, bwb,
-                   old_key, old_us, htab, hmask, new_key, new_us, new_fn, new_ij, nnew,
-                   force, torque, fext, text, qext, res):
-    """Sphere j against block b (normal n from the block to the sphere, contact point p)."""
-    us = np.zeros(3)
-    h = _hkey(key, hmask)
-    while htab[h] >= 0:
-        s = htab[h]
-        if old_key[s] == key:
-            l0 = np.sqrt(old_us[s, 0] ** 2 + old_us[s, 1] ** 2 + old_us[s, 2] ** 2)
-            un = old_us[s, 0] * n[0] + old_us[s, 1] * n[1] + old_us[s, 2] * n[2]
-            for a in range(3):
-                us[a] = old_us[s, a] - un * n[a]
-            l1 = np.sqrt(us[0] ** 2 + us[1] ** 2 + us[2] ** 2)
-            if l1 > 0.0:
-                for a in range(3):
-                    us[a] *= l0 / l1
-            break
-        h = (h + 1) & hmask
+def _block_contact(b, j, key, depth, n, p, mo, sp, blocks, deform, loads, lawrow, dt, hist, hc, nnew, res):
+    """Sphere j against block b (normal n from the block to the sphere, contact point p); the block takes the
+    reaction in ``loads.fext``, ``text``, ``qext``. Returns the contact count."""
+    x = mo.x
+    v = mo.v
+    w = mo.w
+    bpos = blocks.pos
+    bstatic = blocks.fixed  # no sleeping in coupled runs
+    us = np.empty(3)
+    carry_shear(hist, hc, key, n, us)
     rj0 = p[0] - x[j, 0]
     rj1 = p[1] - x[j, 1]
     rj2 = p[2] - x[j, 2]
@@ -70,210 +69,95 @@ def _block_contact(b, j, key, depth, n, p, x, v, w, m, sstatic, lawrow, dt,
     rb2 = p[2] - bpos[b, 2]
     if not bstatic[b]:
         for a in range(3):
-            vrel[a] -= bvel[b, a]
-        if bdof12[b]:
-            quat_matrix(bquat[b], R)
-            point_velocity(b, p, bpos, R, bstrain, bsrate, bwb, wb_)
+            vrel[a] -= blocks.vel[b, a]
+        if blocks.dof12[b]:
+            quat_matrix(blocks.quat[b], R)
+            point_velocity(b, p, bpos, R, deform.strain, deform.srate, deform.wb, wb_)
             for a in range(3):
                 vrel[a] -= wb_[a]
         else:
-            _omega(b, bkin, bstatic, bwpres, bquat, binertia, bangmom, R, wb_)
+            _omega(b, blocks.kin, bstatic, blocks.wpres, blocks.quat, blocks.inertia, blocks.angmom, R, wb_)
             vrel[0] -= wb_[1] * rb2 - wb_[2] * rb1
             vrel[1] -= wb_[2] * rb0 - wb_[0] * rb2
             vrel[2] -= wb_[0] * rb1 - wb_[1] * rb0
-    bs = bstatic[b] or bkin[b]
-    if bs and not sstatic[j]:
-        meff = m[j]
-    elif sstatic[j] and not bs:
-        meff = bmass[b]
+    bs = bstatic[b] or blocks.kin[b]
+    ss = sp.fixed[j] or sp.kin[j]
+    if bs and not ss:
+        meff = sp.m[j]
+    elif ss and not bs:
+        meff = blocks.mass[b]
     else:
-        meff = m[j] * bmass[b] / (m[j] + bmass[b])
+        meff = sp.m[j] * blocks.mass[b] / (sp.m[j] + blocks.mass[b])
     f = np.empty(3)
-    st, bnd, fn_el, ee, df, dd = point_force(lawrow[0], lawrow[1], lawrow[2], 0.0, 0.0, lawrow[5], meff, depth, n,
-                                             vrel, dt, us, False, f)
+    st, bnd, fn_el, ee, df, dd = point_force(lawrow[LAW_KN], lawrow[LAW_KS], lawrow[LAW_TANPHI], 0.0, 0.0,
+                                             lawrow[LAW_ZETA], meff, depth, n, vrel, dt, us, False, f)
     res[0] += ee
     res[1] += df
     res[2] += dd
     if st == 0:
         return nnew
     for a in range(3):
-        force[j, a] += f[a]
-    torque[j, 0] += rj1 * f[2] - rj2 * f[1]
-    torque[j, 1] += rj2 * f[0] - rj0 * f[2]
-    torque[j, 2] += rj0 * f[1] - rj1 * f[0]
+        mo.force[j, a] += f[a]
+    mo.torque[j, 0] += rj1 * f[2] - rj2 * f[1]
+    mo.torque[j, 1] += rj2 * f[0] - rj0 * f[2]
+    mo.torque[j, 2] += rj0 * f[1] - rj1 * f[0]
     if not bstatic[b]:
         for a in range(3):
-            fext[b, a] -= f[a]
-        text[b, 0] -= rb1 * f[2] - rb2 * f[1]
-        text[b, 1] -= rb2 * f[0] - rb0 * f[2]
-        text[b, 2] -= rb0 * f[1] - rb1 * f[0]
-        if bdof12[b]:
-            quat_matrix(bquat[b], R)
-            body_point(b, p, bpos, R, bstrain, X)
-            add_strain_force(b, X, R, f, -1.0, qext)
-    if nnew < new_key.shape[0]:
-        new_key[nnew] = key
-        new_fn[nnew] = fn_el
-        new_ij[nnew, 0] = -1 - b
-        new_ij[nnew, 1] = j
-        for a in range(3):
-            new_us[nnew, a] = us[a]
-    return nnew + 1
+            loads.fext[b, a] -= f[a]
+        loads.text[b, 0] -= rb1 * f[2] - rb2 * f[1]
+        loads.text[b, 1] -= rb2 * f[0] - rb0 * f[2]
+        loads.text[b, 2] -= rb0 * f[1] - rb1 * f[0]
+        if blocks.dof12[b]:
+            quat_matrix(blocks.quat[b], R)
+            body_point(b, p, bpos, R, deform.strain, X)
+            add_strain_force(b, X, R, f, -1.0, loads.qext)
+    return record_contact(hist, hc, nnew, key, fn_el, -1 - b, j, us)
 
 
 @njit(cache=True)
-def _bonds(dt, t, x, v, w, r, m, fixed, kin, bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn,
-           b_break, force, torque, res, cnt):
-    """Bond springs (as dda/_spheres.py). Returns their elastic energy; cnt = [intact, broken]."""
-    e_bond = 0.0
-    for k in range(bi.shape[0]):
-        if not b_intact[k]:
-            continue
-        i = bi[k]
-        j = bj[k]
-        d0 = x[j, 0] - x[i, 0]
-        d1 = x[j, 1] - x[i, 1]
-        d2 = x[j, 2] - x[i, 2]
-        dl = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        nx = d0 / dl
-        ny = d1 / dl
-        nz = d2 / dl
-        a0 = dl * r[i] / (r[i] + r[j])
-        ri0 = a0 * nx
-        ri1 = a0 * ny
-        ri2 = a0 * nz
-        rj0 = ri0 - d0
-        rj1 = ri1 - d1
-        rj2 = ri2 - d2
-        vr0 = v[j, 0] + w[j, 1] * rj2 - w[j, 2] * rj1 - v[i, 0] - (w[i, 1] * ri2 - w[i, 2] * ri1)
-        vr1 = v[j, 1] + w[j, 2] * rj0 - w[j, 0] * rj2 - v[i, 1] - (w[i, 2] * ri0 - w[i, 0] * ri2)
-        vr2 = v[j, 2] + w[j, 0] * rj1 - w[j, 1] * rj0 - v[i, 2] - (w[i, 0] * ri1 - w[i, 1] * ri0)
-        vn = vr0 * nx + vr1 * ny + vr2 * nz
-        u0 = b_us[k, 0]
-        u1 = b_us[k, 1]
-        u2 = b_us[k, 2]
-        l0 = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-        un = u0 * nx + u1 * ny + u2 * nz
-        u0 -= un * nx
-        u1 -= un * ny
-        u2 -= un * nz
-        l1 = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-        if l1 > 0.0:
-            u0 *= l0 / l1
-            u1 *= l0 / l1
-            u2 *= l0 / l1
-        u0 += (vr0 - vn * nx) * dt
-        u1 += (vr1 - vn * ny) * dt
-        u2 += (vr2 - vn * nz) * dt
-        stretch = dl - b_len0[k]
-        fn = b_kn[k] * stretch
-        fs = b_ks[k] * np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-        if fn > b_ft[k] or fs > b_fs[k]:
-            b_intact[k] = False
-            b_break[k] = t
-            b_fn[k] = 0.0
-            res[1] += 0.5 * b_kn[k] * stretch * stretch + 0.5 * b_ks[k] * (u0 * u0 + u1 * u1 + u2 * u2)
-            b_us[k, 0] = 0.0
-            b_us[k, 1] = 0.0
-            b_us[k, 2] = 0.0
-            cnt[1] += 1
-            continue
-        cnt[0] += 1
-        b_us[k, 0] = u0
-        b_us[k, 1] = u1
-        b_us[k, 2] = u2
-        b_fn[k] = fn
-        e_bond += 0.5 * b_kn[k] * stretch * stretch + 0.5 * b_ks[k] * (u0 * u0 + u1 * u1 + u2 * u2)
-        cdn = 0.0
-        cds = 0.0
-        if b_zeta[k] > 0.0:
-            meff = pair_meff(i, j, m, fixed, kin)
-            cdn = 2.0 * b_zeta[k] * np.sqrt(b_kn[k] * meff)
-            cds = 2.0 * b_zeta[k] * np.sqrt(b_ks[k] * meff)
-            res[2] += (cdn * vn * vn + cds * ((vr0 - vn * nx) ** 2 + (vr1 - vn * ny) ** 2
-                                              + (vr2 - vn * nz) ** 2)) * dt
-        f0 = -(fn + cdn * vn) * nx - b_ks[k] * u0 - cds * (vr0 - vn * nx)
-        f1 = -(fn + cdn * vn) * ny - b_ks[k] * u1 - cds * (vr1 - vn * ny)
-        f2 = -(fn + cdn * vn) * nz - b_ks[k] * u2 - cds * (vr2 - vn * nz)
-        force[j, 0] += f0
-        force[j, 1] += f1
-        force[j, 2] += f2
-        torque[j, 0] += rj1 * f2 - rj2 * f1
-        torque[j, 1] += rj2 * f0 - rj0 * f2
-        torque[j, 2] += rj0 * f1 - rj1 * f0
-        force[i, 0] -= f0
-        force[i, 1] -= f1
-        force[i, 2] -= f2
-        torque[i, 0] -= ri1 * f2 - ri2 * f1
-        torque[i, 1] -= ri2 * f0 - ri0 * f2
-        torque[i, 2] -= ri0 * f1 - ri1 * f0
-    return e_bond
-
-
-@njit(cache=True)
-def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
-                  bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break, bkey_tab, bkey_slot,
-                  ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
-                  active, bpos, bvel, bquat, bangmom, bmass, binertia, bfixed, bkin, bwpres, bdof12, bstrain, bsrate,
-                  bwb, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb, fvs, fv,
-                  S_b, margin, mstart, mentries, fstart, fentries, large_list, bstamp, btag,
-                  cur, c_n, c_key, c_us, c_fn, c_ij, htab, force, torque, fext, text, qext, res, stats):
-    """Forces of one step at the current state (see the module docstring). res = [elastic, friction, damping,
-    bond energy]; stats = [sphere contacts, block contacts, intact bonds, broken (cumulative), pairs needed].
-    Returns OK or NEED_CAPACITY (then nothing persistent changed)."""
-    n = x.shape[0]
-    nb = bpos.shape[0]
-    cap = c_key.shape[1]
+def block_geometry(blocks, deform, loads, geom, lists):
+    """World geometry of the awake moving blocks at the current state (as run_chunk computes it); their
+    external forces (the spheres' reactions) cleared."""
     R = np.empty((3, 3))
-    for k in range(active.shape[0]):
-        i = active[k]
-        if bdof12[i]:
-            quat_matrix(bquat[i], R)
-            deform_geometry(i, bpos, R, bstrain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb)
+    for k in range(lists.active.shape[0]):
+        i = lists.active[k]
+        if blocks.dof12[i]:
+            quat_matrix(blocks.quat[i], R)
+            deform_geometry(i, blocks.pos, R, deform.strain, geom.vs, geom.fs, geom.vloc, geom.nloc, geom.dloc,
+                            geom.vert, geom.fnw, geom.fdw, geom.aabb)
         else:
-            update_geometry(i, bpos, bquat, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb)
+            update_geometry(i, blocks.pos, blocks.quat, geom.vs, geom.fs, geom.vloc, geom.nloc, geom.dloc,
+                            geom.vert, geom.fnw, geom.fdw, geom.aabb)
         for a in range(3):
-            fext[i, a] = 0.0
-            text[i, a] = 0.0
+            loads.fext[i, a] = 0.0
+            loads.text[i, a] = 0.0
         for a in range(6):
-            qext[i, a] = 0.0
+            loads.qext[i, a] = 0.0
+
+
+@njit(cache=True)
+def grid_contacts(mo, sp, bonds, joints, lawrow, dt, hist, hc, res):
+    """Sphere-sphere contacts found on a hashed sphere grid (cells of the largest sphere diameter, counting
+    sort), without the pairs of an intact bond and the smooth-joint pairs; returns their count."""
+    x = mo.x
+    r = sp.r
+    n = x.shape[0]
     sstatic = np.empty(n, np.bool_)
     for i in range(n):
-        sstatic[i] = fixed[i] or kin[i]
-    bstatic = bfixed  # no sleeping in coupled runs
-    for i in range(n):
-        for a in range(3):
-            force[i, a] = 0.0
-            torque[i, a] = 0.0
-    for a in range(4):
-        res[a] = 0.0
-    # sphere grid (counting sort into hashed buckets)
+        sstatic[i] = sp.fixed[i] or sp.kin[i]
     rmax = 0.0
     for i in range(n):
         rmax = max(rmax, r[i])
     S = 2.0 * rmax * 1.0001
     cmask, count, entries, cix = hashed_cells(x, S)
     seen = np.empty(27, np.int64)
-    old = cur[0]
-    new = 1 - old
-    nold = c_n[old]
-    hsize = 16
-    while hsize < 2 * nold + 16:
-        hsize *= 2
-    hmask = hsize - 1
-    htab[:hsize] = -1
-    for s in range(nold):
-        h = _hkey(c_key[old, s], hmask)
-        while htab[h] >= 0:
-            h = (h + 1) & hmask
-        htab[h] = s
-    bmask = bkey_tab.shape[0] - 1
-    nbond = bi.shape[0]
-    jmask = jkey_tab.shape[0] - 1
-    njoint = ji.shape[0]
+    bmask = bonds.key_tab.shape[0] - 1
+    nbond = bonds.i.shape[0]
+    jmask = joints.key_tab.shape[0] - 1
+    njoint = joints.i.shape[0]
+    nrm = np.empty(3)
+    pt = np.empty(3)
     nnew = 0
-    rs3 = np.zeros(3)
-    # sphere-sphere
     for i in range(n):
         ns = 0
         for dx in range(-1, 2):
@@ -302,23 +186,36 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
                             continue
                         key = i * n + j
                         if nbond > 0:
-                            kb = bond_lookup(bkey_tab, bkey_slot, key, bmask)
-                            if kb >= 0 and b_intact[kb]:
+                            kb = bond_lookup(bonds.key_tab, bonds.key_slot, key, bmask)
+                            if kb >= 0 and bonds.intact[kb]:
                                 continue
-                        if njoint > 0 and bond_lookup(jkey_tab, jkey_slot, key, jmask) >= 0:
-                            continue  # a smooth joint (below)
-                        dl = np.sqrt(dd)
-                        depth = rs - dl
-                        nx = d0 / dl
-                        ny = d1 / dl
-                        nz = d2 / dl
-                        a0 = r[i] - 0.5 * depth
-                        nnew = _contact(i, j, False, key, depth, nx, ny, nz, x[i, 0] + a0 * nx,
-                                        x[i, 1] + a0 * ny, x[i, 2] + a0 * nz, x, v, w, m, fixed, kin, lawrow,
-                                        dt, c_key[old], c_us[old], htab, hmask, nold, c_key[new], c_us[new],
-                                        c_fn[new], c_ij[new], nnew, force, torque, rs3)
-    nss = nnew
-    # sphere-block: candidates from the block grids (moving, static, large list)
+                        if njoint > 0 and bond_lookup(joints.key_tab, joints.key_slot, key, jmask) >= 0:
+                            continue  # a smooth joint (_joints)
+                        nnew = sphere_pair(i, j, key, mo, sp, lawrow, dt, hist, hc, nnew, res, nrm, pt)
+    return nnew
+
+
+@njit(cache=True)
+def _cell_range(ci, lo, hi):
+    """The cell (ix, iy, iz) number ci of the box of cells lo..hi (z fastest)."""
+    iz = lo[2] + ci % (hi[2] - lo[2] + 1)
+    rest = ci // (hi[2] - lo[2] + 1)
+    iy = lo[1] + rest % (hi[1] - lo[1] + 1)
+    ix = lo[0] + rest // (hi[1] - lo[1] + 1)
+    return ix, iy, iz
+
+
+@njit(cache=True)
+def block_contacts(mo, sp, link, dt, hist, hc, nnew, res, blocks, deform, loads, geom, grid, lists):
+    """Sphere-block contacts, after the nnew sphere-sphere contacts: candidates from the block engine's grids
+    (moving blocks, static blocks, the large blocks' list); each sphere looks up the cells its box covers, each
+    block once (``link.stamp``). Returns the contact count."""
+    x = mo.x
+    r = sp.r
+    fs = geom.fs
+    bstatic = blocks.fixed  # no sleeping in coupled runs
+    mstart = lists.mstart
+    fstart = lists.fstart
     mmask = mstart.shape[0] - 2
     fmask = fstart.shape[0] - 2
     c = np.empty(3)
@@ -326,182 +223,128 @@ def sphere_forces(dt, t, x, v, w, r, m, fixed, kin, lawrow, blawrow,
     nrm = np.empty(3)
     lo = np.empty(3, np.int64)
     hi = np.empty(3, np.int64)
-    for j in range(n):
+    for j in range(x.shape[0]):
+        sstatic = sp.fixed[j] or sp.kin[j]
         for a in range(3):
             c[a] = x[j, a]
-            lo[a] = np.int64(np.floor((x[j, a] - r[j] - margin) / S_b))
-            hi[a] = np.int64(np.floor((x[j, a] + r[j] + margin) / S_b))
-        btag[0] += 1
-        tg = btag[0]
+            lo[a] = np.int64(np.floor((x[j, a] - r[j] - grid.margin) / grid.S))
+            hi[a] = np.int64(np.floor((x[j, a] + r[j] + grid.margin) / grid.S))
+        link.tag[0] += 1
+        tg = link.tag[0]
         for pass_ in range(3):
-            if pass_ == 1 and sstatic[j]:
+            if pass_ == 1 and sstatic:
                 continue  # static spheres meet only moving blocks
-            if pass_ < 2:
-                ncell = (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)
-            else:
-                ncell = 1
+            ncell = (hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1) if pass_ < 2 else 1
             for ci in range(ncell):
                 if pass_ < 2:
-                    iz = lo[2] + ci % (hi[2] - lo[2] + 1)
-                    rest = ci // (hi[2] - lo[2] + 1)
-                    iy = lo[1] + rest % (hi[1] - lo[1] + 1)
-                    ix = lo[0] + rest // (hi[1] - lo[1] + 1)
+                    ix, iy, iz = _cell_range(ci, lo, hi)
                     if pass_ == 0:
                         hh = _hash(ix, iy, iz, mmask)
                         e0 = mstart[hh]
                         e1 = mstart[hh + 1]
                     else:
-                        if fentries.shape[0] == 0:
+                        if lists.fentries.shape[0] == 0:
                             continue
                         hh = _hash(ix, iy, iz, fmask)
                         e0 = fstart[hh]
                         e1 = fstart[hh + 1]
                 else:
                     e0 = 0
-                    e1 = large_list.shape[0]
+                    e1 = lists.large_list.shape[0]
                 for e in range(e0, e1):
                     if pass_ == 0:
-                        bb = mentries[e]
+                        bb = lists.mentries[e]
                     elif pass_ == 1:
-                        bb = fentries[e]
+                        bb = lists.fentries[e]
                     else:
-                        bb = large_list[e]
-                    if bstamp[bb] == tg:
+                        bb = lists.large_list[e]
+                    if link.stamp[bb] == tg:
                         continue
-                    bstamp[bb] = tg
-                    if sstatic[j] and (bstatic[bb] or bkin[bb]):
+                    link.stamp[bb] = tg
+                    if sstatic and (bstatic[bb] or blocks.kin[bb]):
                         continue
-                    if (c[0] + r[j] < aabb[bb, 0] or c[0] - r[j] > aabb[bb, 3] or c[1] + r[j] < aabb[bb, 1]
-                            or c[1] - r[j] > aabb[bb, 4] or c[2] + r[j] < aabb[bb, 2] or c[2] - r[j] > aabb[bb, 5]):
+                    bx = geom.aabb
+                    if (c[0] + r[j] < bx[bb, 0] or c[0] - r[j] > bx[bb, 3] or c[1] + r[j] < bx[bb, 1]
+                            or c[1] - r[j] > bx[bb, 4] or c[2] + r[j] < bx[bb, 2] or c[2] - r[j] > bx[bb, 5]):
                         continue
-                    sd = closest_on_polyhedron(c, fvs, fv, fs[bb], fs[bb + 1], vert, fnw, fdw, cpt)
+                    sd = closest_on_polyhedron(c, link.fvs, link.fv, fs[bb], fs[bb + 1], geom.vert, geom.fnw,
+                                               geom.fdw, cpt)
                     if sd >= r[j]:
                         continue
-                    if sd > 1e-12 * r[j]:
-                        for a in range(3):
-                            nrm[a] = (c[a] - cpt[a]) / sd
-                    else:
-                        best = -1e300
-                        fb = fs[bb]
-                        for f in range(fs[bb], fs[bb + 1]):
-                            s_ = fnw[f, 0] * c[0] + fnw[f, 1] * c[1] + fnw[f, 2] * c[2] - fdw[f]
-                            if s_ > best:
-                                best = s_
-                                fb = f
-                        for a in range(3):
-                            nrm[a] = fnw[fb, a]
-                    key = -1 - (j * nb + bb)
-                    nnew = _block_contact(bb, j, key, r[j] - sd, nrm, cpt, x, v, w, m, sstatic, blawrow[bb], dt,
-                                          bpos, bvel, bquat, bangmom, bmass, binertia, bstatic, bkin, bwpres,
-                                          bdof12, bstrain, bsrate, bwb, c_key[old], c_us[old], htab, hmask,
-                                          c_key[new], c_us[new], c_fn[new], c_ij[new], nnew, force, torque,
-                                          fext, text, qext, rs3)
-    if nnew > cap:
-        stats[4] = nnew
+                    contact_normal(c, cpt, sd, r[j], fs[bb], fs[bb + 1], geom.fnw, geom.fdw, nrm)
+                    nnew = _block_contact(bb, j, -1 - (j * bstatic.shape[0] + bb), r[j] - sd, nrm, cpt, mo, sp,
+                                          blocks, deform, loads, link.lawrow[bb], dt, hist, hc, nnew, res)
+    return nnew
+
+
+@njit(cache=True)
+def sphere_forces(dt, t, mo, sp, env, bonds, joints, link, pl, hist, res, stats, blocks, deform, loads, geom, grid,
+                  lists):
+    """Forces of one step at the current state (see the module docstring). res = [elastic, friction, damping,
+    bond energy] (R_* slots); stats: the ST_* slots (bonds broken cumulative). ``pl``: an empty pair list (a
+    coupled run searches its pairs on the grid each step). Returns OK or NEED_CAPACITY (then nothing
+    persistent changed)."""
+    block_geometry(blocks, deform, loads, geom, lists)
+    clear_forces(mo)
+    for a in range(4):
+        res[a] = 0.0
+    rs3 = np.zeros(3)
+    hc = history_hash(hist)
+    nss = grid_contacts(mo, sp, bonds, joints, env.lawrow, dt, hist, hc, rs3)
+    nnew = block_contacts(mo, sp, link, dt, hist, hc, nss, rs3, blocks, deform, loads, geom, grid, lists)
+    if nnew > hist.key.shape[1]:
+        stats[ST_NEED] = nnew
         return NEED_CAPACITY
-    c_n[new] = nnew
-    cur[0] = new
-    if njoint > 0:
-        # a retired joint's key is blanked: the search above finds it as a plain contact from the next step
-        stats[6], _ = _joints(dt, x, v, r, m, fixed, kin, lawrow, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide,
-                              j_us, j_sgn, jkey_tab, jkey_slot, force, rs3)
+    hist.n[hc[1]] = nnew
+    hist.cur[0] = hc[1]
+    if joints.i.shape[0] > 0:
+        # a retired joint's key is blanked: the grid search finds it as a plain contact from the next step
+        stats[ST_JOINTS], _ = _joints(dt, mo, sp, env.lawrow, joints, rs3)
     res[0] = rs3[0]
     res[1] = rs3[1]
     res[2] = rs3[2]
-    cnt = np.zeros(2, np.int64)
-    res[3] = _bonds(dt, t, x, v, w, r, m, fixed, kin, bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us,
-                    b_intact, b_fn, b_break, force, torque, res, cnt)
-    stats[0] = nss
-    stats[1] = nnew - nss
-    stats[2] = cnt[0]
-    stats[3] += cnt[1]
+    res[R_BOND], nint, nbroken = bond_forces(mo, sp, bonds, pl, dt, t, True, res)
+    stats[ST_CONTACTS] = nss
+    stats[ST_WALL] = nnew - nss
+    stats[ST_BONDS] = nint
+    stats[ST_BROKEN] += nbroken
     return OK
 
 
 @njit(cache=True)
-def sphere_update(dt, dt_prev, gravity, local_damp, visc, x, v, w, m, inertia, fixed, kin, bforce, force, torque,
-                  acc, energy, res):
-    """Central difference of the spheres (as dda/_spheres.py) and their energy terms. Returns False on a
-    non-finite state."""
-    n = x.shape[0]
-    dtavg = 0.5 * (dt + dt_prev)
-    ke = 0.0
-    pe = 0.0
-    d_loc = 0.0
-    ok = True
-    for i in range(n):
-        if fixed[i]:
-            continue
-        ke, pe, d_loc, step_ok = advance_sphere(i, dt, dtavg, gravity, local_damp, visc, x, v, w, m, inertia, kin,
-                                                bforce, force, torque, acc, ke, pe, d_loc)
-        ok &= step_ok
-    energy[0] = ke
-    energy[1] = pe - acc[0]
-    energy[2] = res[0] + res[3]
-    energy[3] += res[1]
-    energy[4] += res[2]
-    energy[5] += d_loc
-    return ok
-
-
-@njit(cache=True)
-def run_coupled(nsteps, resume, dt, dt_prev, t0, gravity, local_damp, visc, first_step,
-                x, v, w, r, m, sinertia, sfixed, skin, sbforce, lawrow, blawrow,
-                bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break, bkey_tab, bkey_slot,
-                ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn, jkey_tab, jkey_slot,
-                scur, sc_n, sc_key, sc_us, sc_fn, sc_ij, shtab, sforce, storque, sacc, senergy, sres, sstats,
-                fvs, fv, bstamp, btag,
-                pos, vel, quat, angmom, mass, inertia, fixed, material, active,
-                movable, kin, wpres, bforce, pl_start, pl_r, pl_f, asleep, calm, pe_sl, sleep_par, acc,
-                vs, fs, es, vloc, nloc, dloc, vert, fnw, fdw, aabb, size_b,
-                he_origin, he_next, he_pair, he_face, vert_he, edge_he,
-                S, cellbox, large, mstart, mentries, fstart, fentries, large_list, stamp, tag, gap, margin,
-                lawtab, keep_gap,
-                cur, c_n_pair, c_key, c_a, c_b, c_nrm, c_np, c_pid, c_us, c_state, c_bond, c_pos, c_fn, c_depth,
-                htab, pa, pb, force, torque, energy, stats,
-                dof12, strain, srate, wb, qs, m9, m9inv, vc, fext, text, qext):
-    """`nsteps` coupled steps (module docstring). `resume`: the first step's sphere forces are already in
-    sforce / fext (a NEED_BLOCK_CAPACITY return before). Returns (status, steps done, fcp iterations, and
-    run_chunk's grids and lists)."""
+def run_coupled(nsteps, resume, dt, dt_prev, t0, first_step, env, sp, mo, bonds, joints, hist, sbooks, sres, link,
+                pl, state):
+    """`nsteps` coupled steps (module docstring): the spheres in the bundles of dda/_sphere_state.py (``mo``:
+    their Motion with the force and torque of a step, ``sres`` the R_* sums of the last sphere forces), the
+    blocks in the block engine's State (dda/_state.py). `resume`: the first step's sphere forces are already
+    in mo.force / fext (a NEED_BLOCK_CAPACITY return before). Returns (status, steps done, fcp iterations, and
+    run_chunk's Lists)."""
+    blocks, deform, loads, forces, geom, grid, lists, sleep, con, law, books = state
+    sync_central(bonds)
     status = OK
     done = 0
     fit = 0
     for step in range(nsteps):
         t = t0 + done * dt
         if not (resume and step == 0):
-            st = sphere_forces(dt, t, x, v, w, r, m, sfixed, skin, lawrow, blawrow,
-                               bi, bj, b_len0, b_kn, b_ks, b_ft, b_fs, b_zeta, b_us, b_intact, b_fn, b_break,
-                               bkey_tab, bkey_slot, ji, jj, j_nrm, j_tan, j_on, j_init, j_slide, j_us, j_sgn,
-                               jkey_tab, jkey_slot, active, pos, vel, quat, angmom, mass, inertia, fixed, kin, wpres,
-                               dof12, strain, srate, wb, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb, fvs, fv,
-                               S, margin, mstart, mentries, fstart, fentries, large_list, bstamp, btag,
-                               scur, sc_n, sc_key, sc_us, sc_fn, sc_ij, shtab, sforce, storque, fext, text, qext,
-                               sres, sstats)
+            st = sphere_forces(dt, t, mo, sp, env, bonds, joints, link, pl, hist, sres, sbooks.stats, blocks,
+                               deform, loads, geom, grid, lists)
             if st != OK:
                 status = NEED_CAPACITY
                 break
-        (st, d, mstart, mentries, pa, pb, large_list, active, fstart, fentries) = run_chunk(
-            1, dt, dt_prev, gravity, local_damp, first_step,
-            pos, vel, quat, angmom, mass, inertia, fixed, material, active,
-            movable, kin, wpres, bforce, pl_start, pl_r, pl_f, asleep, calm, pe_sl, sleep_par, acc,
-            vs, fs, es, vloc, nloc, dloc, vert, fnw, fdw, aabb, size_b,
-            he_origin, he_next, he_pair, he_face, vert_he, edge_he,
-            S, cellbox, large, mstart, mentries, fstart, fentries, large_list, stamp, tag, gap, margin,
-            lawtab, keep_gap,
-            cur, c_n_pair, c_key, c_a, c_b, c_nrm, c_np, c_pid, c_us, c_state, c_bond, c_pos, c_fn, c_depth,
-            htab, pa, pb, force, torque, energy, stats,
-            dof12, strain, srate, wb, qs, m9, m9inv, vc, fext, text, qext)
-        fit += np.int64(stats[3])
+        st, d, lists = run_chunk(1, dt, dt_prev, env.local_damp, first_step, blocks, deform, loads, forces, geom,
+                                 grid, lists, sleep, con, law, books)
+        fit += np.int64(books.stats[ST_FCP_ITER])
         if st == NEED_CAPACITY:
             status = NEED_BLOCK_CAPACITY
             break
         resume = False
         first_step = False
-        ok = sphere_update(dt, dt_prev, gravity, local_damp, visc, x, v, w, m, sinertia, sfixed, skin, sbforce,
-                           sforce, storque, sacc, senergy, sres)
+        ke, pe, d_loc, ok, _ = integrate(mo, sp, env, dt, dt_prev, sbooks.acc, pl.x_ref)  # no move tracking
+        book_energy(sbooks.energy, sbooks.acc, ke, pe, d_loc, sres, sres[R_BOND])
         dt_prev = dt
         done += 1
         if st == BLOWUP or not ok:
             status = BLOWUP
             break
-    return status, done, fit, mstart, mentries, pa, pb, large_list, active, fstart, fentries
+    return status, done, fit, lists

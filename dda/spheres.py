@@ -68,6 +68,9 @@ import numpy as np
 from sgim.portable import matmul
 
 from . import _spheres as _sp
+from ._bondlaw import build_bond_hash
+from ._sphere_state import (B_FN, NBOND_COLS, ST_NEED_PAIRS, Bonds, Books, Env, History, Joints, Link, Motion,
+                            PairList, Spheres, Walls)
 from .progress import tracker
 from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
 from .simulation import BlowUpError, ContactLaw
@@ -357,7 +360,7 @@ class SphereSimulation:
         self.kin = ss.prescribed & ~ss.fixed
         self.bforce = np.ascontiguousarray(ss.body_force, float)
         # bond constants and state in one row per bond (dda/_spheres.py): bond_us and bond_fn are views of it
-        self.bond_rows = np.zeros((ss.n_bonds, 12))
+        self.bond_rows = np.zeros((ss.n_bonds, NBOND_COLS))
         for col, arr in enumerate((ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta)):
             self.bond_rows[:, col] = arr
         self.bond_rows[:, 10] = ss.radii[ss.bond_i] / (ss.radii[ss.bond_i] + ss.radii[ss.bond_j])
@@ -379,7 +382,7 @@ class SphereSimulation:
         self.cbond_zeta = np.ascontiguousarray(zc, float) if np.any(zc > 0) else np.zeros(0)
         self.sphere_rows = (_aligned_rows(n, 8), _aligned_rows(n, 8), _aligned_rows(n, 4, 32))
         self.bond_break_time = np.full(ss.n_bonds, -1.0)
-        self.bkey_tab, self.bkey_slot = _sp.build_bond_hash(ss.bond_i, ss.bond_j, n)
+        self.bkey_tab, self.bkey_slot = build_bond_hash(ss.bond_i, ss.bond_j, n)
         # bonds per sphere (CSR on the lower index): the pair-list build skips bonded pairs with it
         lo, hi = np.minimum(ss.bond_i, ss.bond_j), np.maximum(ss.bond_i, ss.bond_j)
         order = np.lexsort((hi, lo))
@@ -400,7 +403,7 @@ class SphereSimulation:
         self.joint_slide = np.zeros(nj)
         self.joint_us = np.zeros((nj, 3))
         self.joint_sign = np.where(dn >= 0, 1.0, -1.0)
-        self.jkey_tab, self.jkey_slot = _sp.build_bond_hash(self.joint_i, self.joint_j, n)
+        self.jkey_tab, self.jkey_slot = build_bond_hash(self.joint_i, self.joint_j, n)
         # Verlet pair list of the sphere-sphere contacts (margin skin; rebuilt when a sphere moved skin / 2)
         self.skin = 0.2 * float(ss.radii.min())
         self.nl_pairs = np.zeros((max(64, 2 * n), 2), np.int64)
@@ -434,7 +437,10 @@ class SphereSimulation:
         self.btag = np.zeros(1, np.int64)
         self.sforce = np.zeros((ss.n, 3))
         self.storque = np.zeros((ss.n, 3))
-        self.sres = np.zeros(4)
+        self.sres = np.zeros(4)  # R_* slots (dda/_sphere_state.py)
+        # the coupled loop searches its sphere pairs on a grid each step: no pair list (a broken bond has none to join)
+        self.no_pairs = PairList(np.zeros((0, 2), np.int64), np.zeros(1, np.int64), np.zeros(1, np.int64),
+                                 np.zeros((0, 3)), 0.0)
         self.resume = False
         # common critical step: the spheres' (their springs with the sphere-block kn), the blocks' (their own
         # law), and the blocks under NPOINT sphere-block springs
@@ -460,36 +466,19 @@ class SphereSimulation:
         self.E0 = None
 
     def _chunk_coupled(self, nsteps):
-        from . import _coupled as _cp
+        from . import _coupled as _cp  # lazy: the coupled kernels load (or compile) only for runs with blocks
 
-        ss = self.spheres
         b = self.blocks
         A = b.A
+        link = Link(A.face_vert_start, A.face_verts, self.bstamp, self.btag, self.wall_lawrow)
+        mo = Motion(self.x, self.v, self.w, self.sforce, self.storque)
         while True:
-            (status, done, fit, b.mstart, b.mentries, b.pa, b.pb, b.large_list, b.active, b.fstart,
-             b.fentries) = _cp.run_coupled(
-                nsteps, self.resume, self.dt, self.dt_prev, self.time, self.gravity, self.local_damping,
-                self.viscous_damping, b.first_step,
-                self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
-                self.lawrow, self.wall_lawrow,
-                ss.bond_i, ss.bond_j, ss.bond_len0, ss.bond_kn, ss.bond_ks, ss.bond_ft, ss.bond_fs, ss.bond_zeta,
-                self.bond_us, self.bond_intact, self.bond_fn, self.bond_break_time, self.bkey_tab, self.bkey_slot,
-                self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi, self.joint_on, self.joint_init,
-                self.joint_slide, self.joint_us, self.joint_sign, self.jkey_tab, self.jkey_slot,
-                self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab, self.sforce,
-                self.storque, self.acc, self.energy, self.sres, self.stats,
-                A.face_vert_start, A.face_verts, self.bstamp, self.btag,
-                b.pos, b.vel, b.quat, b.angmom, A.mass, A.inertia, A.fixed, A.material, b.active,
-                b.movable, A.kin, A.wpres, A.bforce, A.pl_start, A.pl_r, A.pl_f, b.asleep, b.calm,
-                b.pe_sl, b.sleep_par, b.acc,
-                A.vert_start, A.face_start, A.edge_start, A.vloc, A.nloc, A.dloc, b.vert, b.fnw, b.fdw,
-                b.aabb, b.size_b, A.he_origin, A.he_next, A.he_pair, A.he_face, A.vert_he, A.edge_he,
-                b.S, b.cellbox, b.large, b.mstart, b.mentries, b.fstart, b.fentries,
-                b.large_list, b.stamp, b.tag, b.gap, b.margin, b.lawtab, b.keep_gap,
-                b.cur, b.c_n_pair, b.c_key, b.c_a, b.c_b, b.c_nrm, b.c_np, b.c_pid,
-                b.c_us, b.c_state, b.c_bond, b.c_pos, b.c_fn, b.c_depth, b.htab,
-                b.pa, b.pb, b.force, b.torque, b.energy, b.stats,
-                b.dof12, b.strain_, b.srate, b.wb, b.qs, A.m9, A.m9inv, A.vc, b.fext, b.text, b.qext)
+            sp, env, bonds, joints, hist, books = self.bundles()
+            status, done, fit, lists = _cp.run_coupled(nsteps, self.resume, self.dt, self.dt_prev, self.time,
+                                                       b.first_step, env, sp, mo, bonds, joints, hist, books,
+                                                       self.sres, link, self.no_pairs, b.bundles())
+            b.set_lists(lists)
+            self._central_fn()
             self.resume = False
             if done:
                 self.dt_prev = self.dt
@@ -556,25 +545,16 @@ class SphereSimulation:
     def _chunk(self, nsteps):
         if self.blocks is not None:
             return self._chunk_coupled(nsteps)
-        ss = self.spheres
+        walls = Walls(self.wvert, self.wfn, self.wfd, self.wfv_start, self.wfv, self.wface_start, self.waabb,
+                      self.wall_lawrow)
         while True:
-            status, done = _sp.run_spheres(
-                nsteps, self.dt, self.dt_prev, self.gravity, self.local_damping, self.viscous_damping, self.time,
-                self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce,
-                self.lawrow, self.wall_lawrow,
-                ss.bond_i, ss.bond_j, self.bond_rows, self.bond_intact, self.bond_break_time, self.bond_start,
-                self.bond_nbr, self.bond_idx, self.bond_full, self.cbond_idx, self.cbond_ij, self.cbond_rows,
-                self.cbond_fn, self.cbond_zeta, self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi,
-                self.joint_on, self.joint_init, self.joint_slide, self.joint_us, self.joint_sign, self.jkey_tab,
-                self.jkey_slot,
-                self.wvert, self.wfn, self.wfd, self.wfv_start, self.wfv, self.wface_start, self.waabb,
-                self.nl_pairs, self.nl_n, self.nl_flag, self.x_ref, self.skin, *self.sphere_rows,
-                self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab, self.energy, self.acc,
-                self.stats)
+            sp, env, bonds, joints, hist, books = self.bundles()
+            pl = PairList(self.nl_pairs, self.nl_n, self.nl_flag, self.x_ref, self.skin)
+            status, done = _sp.run_spheres(nsteps, self.dt, self.dt_prev, self.time, env, sp, self.sphere_rows,
+                                           walls, bonds, joints, pl, hist, books)
             if done:
                 self.dt_prev = self.dt
-            if len(self.cbond_idx):
-                self.bond_rows[self.cbond_idx, 9] = self.cbond_fn
+            self._central_fn()
             self.steps += done
             self.time += done * self.dt
             nsteps -= done
@@ -582,10 +562,30 @@ class SphereSimulation:
                 self._grow_sphere_contacts()
                 continue
             if status == _sp.NEED_PAIRS:
-                self.nl_pairs = np.zeros((int(1.5 * self.stats[5]) + 64, 2), np.int64)
+                self.nl_pairs = np.zeros((int(1.5 * self.stats[ST_NEED_PAIRS]) + 64, 2), np.int64)
                 self.nl_flag[0] = 1
                 continue
             return status
+
+    def bundles(self):
+        """The sphere state as the kernels' bundles (dda/_sphere_state.py): (Spheres, Env, Bonds, Joints,
+        History, Books), views of this object's arrays (built anew after the contact buffers grow)."""
+        ss = self.spheres
+        sp = Spheres(self.x, self.v, self.w, ss.radii, self.m, self.inertia, self.fixed, self.kin, self.bforce)
+        env = Env(self.gravity, self.local_damping, self.viscous_damping, self.lawrow)
+        bonds = Bonds(ss.bond_i, ss.bond_j, self.bond_rows, self.bond_intact, self.bond_break_time, self.bond_start,
+                      self.bond_nbr, self.bond_idx, self.bond_full, self.cbond_idx, self.cbond_ij, self.cbond_rows,
+                      self.cbond_fn, self.cbond_zeta, self.bkey_tab, self.bkey_slot)
+        joints = Joints(self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi, self.joint_on,
+                        self.joint_init, self.joint_slide, self.joint_us, self.joint_sign, self.jkey_tab,
+                        self.jkey_slot)
+        hist = History(self.cur, self.c_n, self.c_key, self.c_us, self.c_fn, self.c_ij, self.htab)
+        return sp, env, bonds, joints, hist, Books(self.energy, self.acc, self.stats)
+
+    def _central_fn(self):
+        """The central bonds' normal forces (written by the kernel in the last step of a call) into bond_fn."""
+        if len(self.cbond_idx):
+            self.bond_rows[self.cbond_idx, B_FN] = self.cbond_fn
 
     def _record(self, res):
         res.time.append(self.time)
