@@ -11,7 +11,13 @@ import argparse
 import json
 import sys
 
-from sgim.cli import FORCE_HELP, CliError, _progress, add_version, positive_int, run_command
+from sgim.common import FORCE_HELP, CliError, add_version, positive_int, run_command
+from sgim.common import progress_printer as _progress
+
+from . import registry
+
+# The commands import the deck, frames and engine modules when they run, not here: `adapters --help` stays quick
+# (they load numpy, and the in-house engine numba).
 
 EXIT_ENGINE = 3
 
@@ -38,20 +44,11 @@ def cmd_export(args):
 
 
 def cmd_run(args):
-    from pathlib import Path
-
-    from .deck import read_deck, run
+    from .deck import run
 
     say = _progress(args.quiet)
-    if args.in_house:
-        from .inhouse import run_inhouse
-        from .spec import SphereRun
-
-        read_deck(args.deck)
-        path = Path(args.deck) / "run.npz"
-        if not path.is_file():
-            raise CliError(f"{args.deck}: no run.npz (a sphere deck is needed for --in-house)")
-        res = run_inhouse(SphereRun.load(path), out=args.output or Path(args.deck) / "result-dda", progress=say)
+    if args.in_house:  # the in-house engine's runner (registry target "dda") on the deck's run.npz
+        res = registry.target("dda").run(args.deck, out=args.output, progress=say)
     else:
         res = run(args.deck, out=args.output, np=args.np, timeout=args.timeout, progress=say)
     summary = {"engine": res.engine, "status": res.status, "steps": res.steps, "wall_s": round(res.wall_s, 3),
@@ -69,10 +66,12 @@ def main(argv=None):
     p = sub.add_parser("export", help="write a deck folder for an engine (or a text / VTU export)")
     p.add_argument("source", help="DDA scene (.toml with [spheres], or blocks for yade), sgim scene .toml, "
                                   "model.npz or run.npz")
-    p.add_argument("--to", required=True, help="yade | liggghts | pfc-text | vtu")
+    p.add_argument("--to", required=True, help=" | ".join(registry.export_names()))
     p.add_argument("-o", "--output", required=True, help="deck folder (new, empty, or an earlier export's "
                                                          "with --force)")
-    p.add_argument("--variant", help="liggghts: bonds (default) | sjkr | clumps")
+    p.add_argument("--variant", help="; ".join(
+        f"{t.to}: " + " | ".join(v + (" (default)" if v == t.default_variant else "") for v in t.variants)
+        for t in registry.TARGETS if t.default_variant))
     p.add_argument("--duration", type=float, help="run length [s] (overrides the scene)")
     p.add_argument("--dt", type=float, help="time step [s] (overrides the scene)")
     p.add_argument("--record-every", type=float, help="record interval [s]")

@@ -9,19 +9,15 @@
 - a ``run.npz`` (a deck's SphereRun): as it is.
 
 ``overrides`` (duration, dt, record_every, viscous_damping, liggghts_joints) shorten or change the run. ``to`` is
-one of:
-
-=========  ======================================================================
-yade       DECK/script.py + run.npz (JCFpm bonded spheres), or a Polyhedra deck
-liggghts   DECK/data + DECK/in + run.npz (variant: bonds, sjkr, clumps)
-pfc-text   DECK/balls.txt + DECK/contacts.txt (sgim's PFC-style text lists)
-vtu        DECK/spheres.vtu (points: radius, colour, fixed, bond count) + bonds.vtu (lines)
-=========  ======================================================================
+a target of adapters/registry.py (yade, liggghts, pfc-text, vtu; a block scene: yade, the YADE Polyhedra deck):
+the target's writer writes the deck, what the target cannot take (a variant, an option, a run.npz without a
+model) is refused first in one line naming the choices.
 
 Every deck has ``deck.json`` (engine, variant, source, counts, steps, dt, the files). The folder is assembled
 under a temporary name and renamed into place: a failed export leaves nothing behind.
-``run(deck, out)`` runs a yade / liggghts deck (adapters.yade, adapters.liggghts) and returns the RunResult
-it saved into `out` (default DECK/result).
+``run(deck, out)`` runs a deck with the runner of its deck.json engine (yade, yade-polyhedra, liggghts), after the
+engine's reader has checked every file the run reads, and returns the RunResult it saved into `out` (default
+DECK/result).
 """
 from __future__ import annotations
 
@@ -29,14 +25,19 @@ import json
 import tomllib
 from pathlib import Path
 
-import numpy as np
+from sgim.model import SphereModel, check_model
+from sgim.outdir import output_folder
+from sgim.readback import Fields, read_json, read_npz
 
+from . import registry
+from .frames import write_result_frames
+from .liggghts_joints import open_joint_problem
 from .process import EngineError
-from .spec import SpecError, SphereRun, check_run, check_steps, from_model, from_scene
+from .spec import (LIGGGHTS_JOINTS, SpecError, SphereRun, check_run, check_steps, from_model, from_scene,
+                   viscous_coefficient)
 
-TARGETS = ("yade", "liggghts", "pfc-text", "vtu")
-RUNNABLE = ("yade", "yade-polyhedra", "liggghts")
-VARIANTS = {"liggghts": ("bonds", "sjkr", "clumps"), "yade": ("jcfpm",)}
+TARGETS = registry.export_names()  # the --to names: yade, liggghts, pfc-text, vtu
+RUNNABLE = registry.runnable_names()  # deck.json engines `adapters run` runs: yade, yade-polyhedra, liggghts
 
 
 class DeckError(ValueError):
@@ -57,8 +58,6 @@ def load_source(source, overrides=None, max_steps=None, limit_steps=True):
     """(kind, SphereRun or None, SphereModel or None) of `source`; kind: "spheres" or "blocks". With
     `limit_steps`, a sphere run whose steps pass the step limit (`max_steps`, the --max-steps value, else the
     scene's; spec.check_steps) is refused."""
-    from sgim.model import SphereModel
-
     path = Path(source)
     if not path.is_file():
         raise DeckError(f"{path}: no such file")
@@ -73,15 +72,12 @@ def load_source(source, overrides=None, max_steps=None, limit_steps=True):
                              limit_steps=limit_steps)
             model = _scene_model(path)
         else:
-            from sgim.builder import build_model
+            from sgim.builder import build_model  # lazy: the sgim builder loads numba (an sgim scene source only)
             from sgim.scene import load_scene
 
             model = build_model(load_scene(path))
             run = from_model(model, source=str(path), **_run_kw(ov))
     else:  # an npz: a run.npz (it has a JSON header) or a model.npz, validated (sgim.readback.BadFile)
-        from sgim.model import check_model
-        from sgim.readback import read_npz
-
         arrays = read_npz(path, "a model.npz or run.npz")
         if "header" in arrays or "bond_i" in arrays:
             run = SphereRun(**check_run(path, arrays))
@@ -95,7 +91,7 @@ def load_source(source, overrides=None, max_steps=None, limit_steps=True):
 
 
 def _scene_model(path):
-    from dda.scene import load_scene
+    from dda.scene import load_scene  # lazy: dda.scene loads numba
 
     return load_scene(path).spheres["model"]
 
@@ -115,8 +111,6 @@ def _apply_overrides(run, ov, path):
         run.record_every = run.duration / 100 if run.record_every > run.duration else run.record_every
     run.record_every = min(run.record_every, run.duration)
     if "liggghts_joints" in ov:  # --liggghts-joints: how a LIGGGHTS deck writes the joint pairs
-        from .spec import LIGGGHTS_JOINTS
-
         raw = ov["liggghts_joints"]
         if raw not in LIGGGHTS_JOINTS:
             raise DeckError(f"{path}: --liggghts-joints = {raw!r}: must be one of {', '.join(LIGGGHTS_JOINTS)}")
@@ -124,13 +118,9 @@ def _apply_overrides(run, ov, path):
             raise DeckError(f"{path}: --liggghts-joints = 'open': stands in for smooth joints, but the run has "
                             "smooth_joints = false")
         run.liggghts_joints = raw
-        from .liggghts import open_joint_problem
-
         if open_joint_problem(run):
             raise DeckError(f"{path}: --liggghts-joints = 'open': {open_joint_problem(run)}")
     if "viscous_damping" in ov:  # --viscous-damping: a ratio of critical damping of the first mode, or critical
-        from .spec import viscous_coefficient
-
         raw = ov["viscous_damping"]
         try:
             value = raw if str(raw).strip().lower() == "critical" else float(raw)
@@ -150,63 +140,38 @@ def export(source, to, out, variant=None, overrides=None, progress=None, max_ste
     A yade or liggghts deck whose steps (duration / dt) pass the step limit (`max_steps`, the --max-steps
     value, else the DDA scene's [simulation] max_steps, else 1e8; dda/limits.py) is refused before the folder
     is made."""
-    from sgim.cli import output_folder
-
-    if to not in TARGETS:
-        raise DeckError(f"--to: unknown target {to!r} (choose from {', '.join(TARGETS)})")
-    if variant is not None and variant not in VARIANTS.get(to, ()):
-        raise DeckError(f"--variant: {variant!r} is not a {to} variant "
-                        f"(choose from {', '.join(VARIANTS.get(to, ())) or 'none'})")
-    if (overrides or {}).get("liggghts_joints") is not None and to != "liggghts":
-        raise DeckError(f"--liggghts-joints: for --to liggghts only, not {to}")
+    target = _export_target(to, variant, overrides)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise DeckError(f"{out}: output exists and is not a folder")
     dest = output_folder(out, "adapters export", force=force, say=progress)
     try:
-        kind, run, model = load_source(source, overrides, max_steps=max_steps, limit_steps=to in RUNNABLE)
+        kind, run, model = load_source(source, overrides, max_steps=max_steps, limit_steps=target.runnable)
     except SpecError as exc:
         raise DeckError(str(exc)) from None
-    blocks_scene = None
-    if kind == "blocks" and to == "yade":  # the polyhedra deck's steps, before the folder is made
-        from dda.scene import load_scene
-
-        from .yade_poly import polyhedra_steps
-
-        blocks_scene = load_scene(source)
-        ov = overrides_for_blocks(overrides)
-        ov["dt"], ov["duration"] = polyhedra_steps(blocks_scene, source, ov.get("dt"), ov.get("duration"),
-                                                   max_steps)
-    if kind == "blocks" and to != "yade":
-        raise DeckError(f"{source}: a block scene (no [spheres]) exports to yade (Polyhedra) only, not {to}")
+    if kind != target.source:  # a block scene: the target of `to` for blocks, if there is one
+        target = registry.for_export(to, kind)
+        if target is None:
+            names = ", ".join(t.to for t in registry.TARGETS if t.source == kind)
+            raise DeckError(f"{source}: a block scene (no [spheres]) exports to {names} (Polyhedra) only, not {to}")
+    prepared = target.function("prepare")(source, overrides, max_steps) if target.prepare else None  # steps
     if kind == "spheres" and run.n == 0:
         raise DeckError(f"{source}: the model has no spheres")
-    if to == "pfc-text" and model is None:
-        raise DeckError(f"{source}: pfc-text needs an sgim model or scene (a run.npz has no model)")
+    if target.needs_model and model is None:
+        raise DeckError(f"{source}: {to} needs an sgim model or scene (a run.npz has no model)")
+    variant = variant or target.default_variant
     with dest.assemble() as tmp:
-        info = {"engine": to, "variant": variant, "source": str(source)}
+        info = {"engine": target.name, "variant": variant, "source": str(source)}
         if kind == "blocks":
-            from .yade_poly import write_polyhedra_deck
-
-            info["engine"] = "yade-polyhedra"
-            info.update(write_polyhedra_deck(source, tmp, **ov, scene=blocks_scene) or {})
+            info.update(target.write(source, tmp, prepared) or {})
         else:
             info.update(name=run.name, n=int(run.n), n_bonds=int(run.n_bonds), n_joints=int(len(run.joint_i)),
                         steps=int(run.steps), dt=float(run.dt), record_steps=int(run.record_steps),
                         duration=float(run.duration))
-            if to in ("yade", "liggghts"):
+            if target.saves_run:
                 run.save(tmp / "run.npz")
-                if to == "yade":
-                    from .yade import write_deck
-                    info.update(write_deck(run, tmp) or {})
-                else:
-                    from .liggghts import write_deck
-                    info.update(write_deck(run, tmp, variant=variant or "bonds") or {})
-                    info["variant"] = variant or "bonds"
-            elif to == "pfc-text":
-                model.save_text(tmp / "balls.txt", tmp / "contacts.txt")
-            else:
-                write_vtu(run, tmp)
+            info.update(target.write(run, tmp, variant, **({"model": model} if target.needs_model else {})) or {})
+            info["variant"] = variant
         info["files"] = sorted(p.name for p in tmp.iterdir())
         (tmp / "deck.json").write_text(json.dumps(info, indent=2))
     if progress:
@@ -214,33 +179,25 @@ def export(source, to, out, variant=None, overrides=None, progress=None, max_ste
     return info
 
 
-def overrides_for_blocks(overrides):
-    return {k: v for k, v in (overrides or {}).items() if k in ("duration", "dt", "record_every") and v is not None}
-
-
-def write_vtu(run: SphereRun, folder):
-    """spheres.vtu (vertex cells: radius, colour, fixed, intact-bond count) and bonds.vtu (one line per bond)."""
-    import meshio
-
-    from sgim.model import atomic_vtu
-
-    n = run.n
-    nb = np.bincount(np.r_[run.bond_i, run.bond_j].astype(np.int64), minlength=n)
-    pts = meshio.Mesh(run.centers, [("vertex", np.arange(n, dtype=np.int64).reshape(-1, 1))],
-                      point_data={"radius": run.radii, "colour": run.colour.astype(np.int32),
-                                  "fixed": run.fixed.astype(np.int32), "bonds": nb.astype(np.int32)})
-    lines = meshio.Mesh(run.centers, [("line", np.c_[run.bond_i, run.bond_j].astype(np.int64))],
-                        cell_data={"kn": [run.bond_kn], "tensile_force": [np.where(np.isfinite(run.bond_ft),
-                                                                                    run.bond_ft, -1.0)]})
-    for name, mesh in (("spheres.vtu", pts), ("bonds.vtu", lines)):
-        atomic_vtu(Path(folder) / name, mesh)
+def _export_target(to, variant, overrides):
+    """The registry's target of `--to to` for a sphere source, with `variant` and the overrides checked against
+    what it takes (DeckError: one line naming the choices)."""
+    target = registry.for_export(to)
+    if target is None:
+        raise DeckError(f"--to: unknown target {to!r} (choose from {', '.join(TARGETS)})")
+    if variant is not None and variant not in target.variants:
+        raise DeckError(f"--variant: {variant!r} is not a {to} variant "
+                        f"(choose from {', '.join(target.variants) or 'none'})")
+    for key, value in (overrides or {}).items():
+        takers = [t.to for t in registry.TARGETS if key in t.options]
+        if value is not None and takers and key not in target.options:
+            raise DeckError(f"--{key.replace('_', '-')}: for --to {' | '.join(takers)} only, not {to}")
+    return target
 
 
 def read_deck(deck):
     """deck.json of the deck folder `deck` (a JSON object naming a runnable engine; a liggghts deck's variant, when
     given, one of its variants). DeckError for a folder without deck.json, BadFile for a broken one."""
-    from sgim.readback import Fields, read_json
-
     deck = Path(deck)
     path = deck / "deck.json"
     if not path.is_file():
@@ -250,8 +207,9 @@ def read_deck(deck):
     if info.get("engine") not in RUNNABLE:
         raise DeckError(f"{path}: engine {info.get('engine')!r} is not runnable "
                         f"(runnable decks: {', '.join(RUNNABLE)})")
-    if info["engine"] == "liggghts" and info.get("variant") is not None:
-        F.string("variant", choices=VARIANTS["liggghts"])
+    target = registry.target(info["engine"])
+    if target.checks_variant and info.get("variant") is not None:
+        F.string("variant", choices=target.variants)
     F.strings("approximations", None)
     return info
 
@@ -262,26 +220,12 @@ def check_deck(deck, info):
     started: a broken file is one BadFile / DeckError line, and nothing is run or written."""
     deck = Path(deck)
     engine = info["engine"]
-    need = {"yade": ("run.npz", "script.py", "yade.json"), "liggghts": ("run.npz", "data", "in"),
-            "yade-polyhedra": ("blocks.npz", "poly.json", "script.py")}[engine]
-    for name in need:
+    target = registry.target(engine)
+    for name in target.deck_files:
         if not (deck / name).is_file():
             raise DeckError(f"{deck}: not a complete {engine} deck (missing {name}; write it with `adapters export`)")
-    if engine == "yade-polyhedra":
-        from .yade_poly import check_polyhedra_deck
-
-        check_polyhedra_deck(deck)
-        return
-    run = SphereRun.load(deck / "run.npz")
-    if engine == "yade":
-        from .yade import read_config
-
-        read_config(deck / "yade.json")
-    else:
-        from .liggghts import check_data, deck_variant
-
-        check_data(deck / "data", run, deck_variant(deck))
-    if run.n == 0:
+    run = target.read(deck)  # the target's reader: every file its runner reads, back and checked
+    if run is not None and run.n == 0:
         raise DeckError(f"{deck / 'run.npz'}: the run has no spheres")
 
 
@@ -296,17 +240,8 @@ def run(deck, out=None, np=1, timeout=None, progress=None):
         raise DeckError(f"--timeout must be > 0 seconds (got {timeout!r})")
     check_deck(deck, info)  # every file the run will read, before the engine starts
     out = Path(out) if out is not None else deck / "result"
-    engine = info["engine"]
-    if engine == "yade":
-        from .yade import run_deck
-    elif engine == "yade-polyhedra":
-        from .yade_poly import run_polyhedra_deck as run_deck
-    else:
-        from .liggghts import run_deck
-    from .frames import write_result_frames  # ParaView files beside the result, whatever the engine
-
-    try:
-        res = run_deck(deck, out, np=np, timeout=timeout, progress=progress)
+    try:  # ParaView files beside the result (adapters/frames.py), whatever the engine
+        res = registry.target(info["engine"]).run(deck, out, np=np, timeout=timeout, progress=progress)
     except EngineError as exc:
         if exc.result is not None:
             write_result_frames(exc.result, out, deck / "run.npz", progress)
@@ -315,5 +250,5 @@ def run(deck, out=None, np=1, timeout=None, progress=None):
     return res
 
 
-__all__ = ["export", "run", "load_source", "read_deck", "check_deck", "write_vtu", "DeckError", "EngineError",
-           "TARGETS"]
+__all__ = ["export", "run", "load_source", "read_deck", "check_deck", "DeckError", "EngineError", "TARGETS",
+           "RUNNABLE"]

@@ -25,7 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
+from dda.render import write_pvd
+from sgim.common import atomic_path
+from sgim.outdir import output_folder
+from sgim.vtu import array, constant, pieces, points_and_lines
+
 from .result import RunResult
+from .spec import SphereRun
 
 FRAME = "frames/frame_{:05d}.vtu"
 
@@ -47,8 +53,6 @@ def is_result(source):
 def find_run(result_folder, n):
     """(SphereRun, path) of the deck a result folder belongs to: run.npz in the folder or in its parent
     (DECK/result and DECK/result-dda); (None, None) when there is none or it has not `n` spheres."""
-    from .spec import SphereRun
-
     for cand in (Path(result_folder) / "run.npz", Path(result_folder).resolve().parent / "run.npz"):
         if cand.is_file():
             try:
@@ -69,8 +73,6 @@ def _frames(result: RunResult):
 
 
 def _point_data(result: RunResult, run, pos, velocity=None):
-    from sgim.vtu import array
-
     n = result.n
     disp = np.asarray(pos, float) - np.asarray(result.x0, float)
     data = [array("id", np.arange(n, dtype=np.int64)), array("displacement", disp),
@@ -86,9 +88,6 @@ def _point_data(result: RunResult, run, pos, velocity=None):
 def write_frames(result: RunResult, folder, run=None):
     """Write frames/*.vtu, result.pvd and final.vtu of `result` into `folder` (see the module docstring); frames
     of an earlier run in the folder are removed first. Returns {"frames": count, "files": [...]}."""
-    from dda.render import write_pvd
-    from sgim.model import atomic_path
-    from sgim.vtu import constant, pieces, points_and_lines
 
     folder = Path(folder)
     (folder / "frames").mkdir(parents=True, exist_ok=True)
@@ -125,8 +124,6 @@ def write_result_frames(result: RunResult, folder, run=None, progress=None):
     holds the result's spheres); a progress line names result.pvd. Called by adapters.run (deck.run) and
     run_inhouse for every result they save, a partial one included."""
     if run is not None and not hasattr(run, "radii"):
-        from .spec import SphereRun
-
         try:
             run = SphereRun.load(run) if Path(run).is_file() else None
         except Exception:  # noqa: BLE001 - the deck was checked before the run; frames without it otherwise
@@ -142,7 +139,6 @@ def export_result(source, out, force=False, progress=None):
     """``adapters export RESULT --to vtu -o OUT``: the result folder (or its result.npz) `source` as ParaView
     files in the output folder `out` (sgim/outdir.py rules): frames/*.vtu, result.pvd, final.vtu and
     export.json. The bonds, radii and colours come from the deck's run.npz beside or above the result."""
-    from sgim.cli import output_folder
 
     src = Path(source)
     folder = src if src.is_dir() else src.parent

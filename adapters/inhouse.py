@@ -23,12 +23,18 @@ A blow-up (non-finite state) raises adapters.process.EngineError with the partia
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from sgim.common import CliError
+
+from .deck import read_deck
+from .frames import write_result_frames
 from .process import EngineError
 from .result import COMPLETE, INCOMPLETE, RunResult
+from .spec import SphereRun, liggghts_only
 
 POS_LIMIT = 5_000_000  # record positions when n * records <= POS_LIMIT
 
@@ -45,8 +51,6 @@ def spatial_order(centers, radii):
 def reordered(run, perm):
     """(run with sphere p = run's sphere perm[p] and its bonds sorted by new index, bond order: new bond q is
     the run's bond order[q])."""
-    from dataclasses import replace
-
     inv = np.empty_like(perm)
     inv[perm] = np.arange(len(perm))
 
@@ -74,15 +78,13 @@ def reordered(run, perm):
 
 def approximations(run):
     """What the in-house engine does not represent of `run`: strings naming the scene key (RunResult.extra)."""
-    from .spec import liggghts_only
-
     return liggghts_only(run)  # every key of a run: bonds, joints, loads, contact, local, viscous and bond damping
 
 
 def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
     """Run `run` (adapters.spec.SphereRun) in-house; RunResult (engine "dda"), saved into `out` when given
     (with its ParaView files: adapters/frames.py)."""
-    from dda.simulation import BlowUpError
+    from dda.simulation import BlowUpError  # lazy: numba, loaded by the run anyway (run.in_house())
 
     t_setup = time.perf_counter()
     perm = spatial_order(run.centers, run.radii)
@@ -125,8 +127,6 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
                                "pair_list_builds": int(sim.stats[7]),
                                "smooth_joints": int(ss.n_joints), "threads": 1})
         if out is not None:
-            from .frames import write_result_frames
-
             res.save(Path(out))
             write_result_frames(res, out, run, progress)  # ParaView files beside the result
         return res
@@ -153,4 +153,14 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
     return result(COMPLETE, "", time.perf_counter() - t0)
 
 
-__all__ = ["approximations", "run_inhouse"]
+def run_deck(deck, out=None, np=1, timeout=None, progress=None) -> RunResult:
+    """The registry's runner of target "dda" (``adapters run DECK --in-house``): the sphere deck's run.npz run
+    in-house; the RunResult is saved into `out` (default DECK/result-dda). `np` and `timeout` are not used."""
+    read_deck(deck)
+    path = Path(deck) / "run.npz"
+    if not path.is_file():
+        raise CliError(f"{deck}: no run.npz (a sphere deck is needed for --in-house)")
+    return run_inhouse(SphereRun.load(path), out=out or Path(deck) / "result-dda", progress=progress)
+
+
+__all__ = ["approximations", "run_inhouse", "run_deck"]

@@ -25,6 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from sgim.common import atomic_npz, atomic_path
+from sgim.readback import Arrays, Fields, read_json, read_npz
+
 COMPLETE, INCOMPLETE = "complete", "incomplete"
 
 
@@ -66,8 +69,6 @@ class RunResult:
 
     def save(self, folder):
         """Write result.npz and result.json into `folder` (each written under a temporary name first)."""
-        from sgim.model import atomic_npz, atomic_path
-
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         pos = self.pos if self.pos is not None else np.zeros((0, self.n, 3))
@@ -91,8 +92,6 @@ class RunResult:
         agreeing with each other and with result.json (n, n_bonds, records, series), record times finite, and
         positions and velocities finite in a complete result (an incomplete one may hold the NaN of a blow-up).
         Raises sgim.readback.BadFile naming the file and the first defect."""
-        from sgim.readback import Arrays, Fields, read_json, read_npz
-
         folder = Path(folder)
         jpath, npath = folder / "result.json", folder / "result.npz"
         F = Fields(jpath, read_json(jpath, "a result.json"))

@@ -39,6 +39,17 @@ from pathlib import Path
 
 import numpy as np
 
+from dda.limits import check, sphere_bond_key, sphere_dt_source
+from dda.timestep import sphere_critical_dt, sphere_mass
+from sgim.common import SceneError, atomic_npz
+from sgim.model import SphereModel
+from sgim.readback import Arrays, Fields, parse_json, read_npz
+
+from .liggghts_joints import open_joint_problem
+
+# The in-house engine's modules (dda.spheres, dda.simulation, dda.scene) load numba: the functions below that need
+# them import them when called, so that reading or writing a run.npz (every `adapters run`) does not load it.
+
 ARRAYS = ("centers", "radii", "colour", "fixed", "bond_i", "bond_j", "bond_len0", "bond_kn", "bond_ks", "bond_ft",
           "bond_fs", "joint_i", "joint_j", "joint_disc", "joint_normal", "cut_i", "cut_j", "gravity")
 ARRAYS += ("force", "prescribed", "velocity")  # loads; optional in run.npz files (absent: none)
@@ -152,8 +163,6 @@ class SphereRun:
     # -- files ---------------------------------------------------------------
     def save(self, path):
         """One npz: the arrays plus a JSON string ``header`` with the scalars."""
-        from sgim.model import atomic_npz
-
         data = {k: np.asarray(getattr(self, k)) for k in ARRAYS}
         data["header"] = np.array(json.dumps(self.scalars()))
         atomic_npz(path, data)
@@ -162,13 +171,11 @@ class SphereRun:
     def load(cls, path):
         """The run in the npz `path` (a deck's run.npz), validated (:func:`check_run`): a file that is not a
         usable run raises sgim.readback.BadFile (a CliError: ``FILE: what is wrong``)."""
-        from sgim.readback import read_npz
-
         return cls(**check_run(path, read_npz(path, "a run.npz")))
 
     def in_house(self):
         """(SphereSet, SphereSimulation) of the in-house engine for this run (dda.spheres)."""
-        from dda.simulation import ContactLaw
+        from dda.simulation import ContactLaw  # lazy: numba (see the top)
         from dda.spheres import SphereSimulation
 
         ss = _sphere_set(self)
@@ -189,8 +196,6 @@ def check_run(path, arrays):
     centres / radii / stiffnesses / normals / loads are finite, radii > 0, strengths >= 0 (inf: unbreakable), colour
     codes 0..3, every sphere index in range and no sphere both fixed and prescribed. Raises
     sgim.readback.BadFile naming the file and the first defect."""
-    from sgim.readback import Arrays, Fields, parse_json
-
     A = Arrays(path, arrays, "a run.npz")
     A.missing(["header", *(k for k in ARRAYS if k not in OPTIONAL_ARRAYS)])
     F = Fields(path, parse_json(path, A.text("header"), where="header"), where="header.")
@@ -245,7 +250,7 @@ def check_run(path, arrays):
 
 
 def _sphere_set(run: SphereRun):
-    from dda.spheres import SphereSet
+    from dda.spheres import SphereSet  # lazy: numba (see the top)
 
     ss = SphereSet(run.centers, run.radii, run.density)
     ss.fixed[:] = run.fixed
@@ -278,12 +283,9 @@ def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None
     (n, 3) or (3,) [N] on each sphere, `prescribed` (n,) bool, `velocity` (n, 3) or (3,) [m/s] (None: none).
     `viscous_damping`: ratio of critical damping of the model's first mode (a number >= 0, or "critical" = 1),
     turned into the coefficient c [N s/m] of SphereRun.viscous_damping by :func:`viscous_coefficient`."""
-    from dda.spheres import BondLaw, SphereSet, SphereSimulation
-    from dda.simulation import ContactLaw
+    from dda.spheres import BondLaw, SphereSet  # lazy: numba (see the top)
 
     if not hasattr(model, "centers"):
-        from sgim.model import SphereModel
-
         model = SphereModel.load(model)
     n = len(model.radii)
     if n == 0:
@@ -310,15 +312,34 @@ def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None
         local_damping=float(local_damping), source=str(source), bond_zeta=ss.bond_zeta.copy())
     _set_loads(run, force, prescribed, velocity)
     if dt is None:
-        sim = SphereSimulation(_sphere_set(run), ContactLaw(kn=run.kn, ks=run.ks, friction_deg=run.friction_deg,
-                                                              damping=run.damping), safety=safety)
-        dt = safety * sim.dt_crit
+        dt = safety * critical_dt(run, ss, safety)
     run.dt = float(dt)
     if not (run.dt > 0 and math.isfinite(run.dt)):
         raise SpecError(f"{source or 'model'}: time step must be > 0 (got {dt!r})")
     if viscous_damping:
         run.viscous_damping = viscous_coefficient(run, viscous_damping)
     return run
+
+
+def critical_dt(run, spheres, safety):
+    """The in-house engine's critical time step of `run` (dda.timestep.sphere_critical_dt: the stiffest free
+    sphere on its bonds and four contacts), without building the engine. `spheres`: the run's dda SphereSet (its
+    spheres and bonds). The run is checked as the engine checks it when it computes the step (ValueError): the
+    smooth joints, finite bond stiffness, the contact law, a positive step at `safety`."""
+    from dda.simulation import ContactLaw  # lazy: numba (see the top)
+
+    if run.smooth_joints and len(run.joint_i):
+        spheres.add_joints(np.c_[run.joint_i, run.joint_j], run.joint_normal, run.joint_friction_deg)
+    if run.n_bonds and not np.all(np.isfinite(run.bond_kn)):
+        raise ValueError("bond stiffness must be finite")
+    kn, ks, _, _, _, zeta = ContactLaw(kn=run.kn, ks=run.ks, friction_deg=run.friction_deg,
+                                       damping=run.damping).row()
+    free = ~(np.asarray(run.fixed, bool) | np.asarray(run.prescribed, bool))
+    dt_crit = sphere_critical_dt(sphere_mass(run.radii, run.density), free, kn, ks, zeta, run.bond_i, run.bond_j,
+                                 run.bond_kn, run.bond_ks, run.bond_zeta)
+    if not float(safety) * dt_crit > 0:
+        raise ValueError("time step must be > 0 (got None)")  # the engine's own refusal of this step
+    return dt_crit
 
 
 def damping_ratio(value, what="viscous damping"):
@@ -342,7 +363,7 @@ def _mass(run):
 
 def held_spheres(run):
     """(n,) bool: the free spheres that a path of bonds ties to a fixed sphere (dda.spheres.held_by_bonds)."""
-    from dda.spheres import held_by_bonds
+    from dda.spheres import held_by_bonds  # lazy: numba (see the top)
 
     return held_by_bonds(run.n, run.bond_i, run.bond_j, _anchored(run))
 
@@ -350,7 +371,7 @@ def held_spheres(run):
 def static_displacement(run, gravity=None):
     """Static displacement (n, 3) of the run's bond network under its weight (`gravity`, default run.gravity;
     dda.spheres.bond_network_static: normal and shear bond springs, the spheres held by bonds)."""
-    from dda.spheres import bond_network_static
+    from dda.spheres import bond_network_static  # lazy: numba (see the top)
 
     g = run.gravity if gravity is None else gravity
     return bond_network_static(run.centers, _mass(run), _anchored(run), run.bond_i, run.bond_j, run.bond_kn,
@@ -359,7 +380,7 @@ def static_displacement(run, gravity=None):
 
 def first_mode(run):
     """(omega [rad/s], mean mass [kg]) of the run's first mode (dda.spheres.first_mode)."""
-    from dda.spheres import first_mode as network_first_mode
+    from dda.spheres import first_mode as network_first_mode  # lazy: numba (see the top)
 
     return network_first_mode(run.centers, _mass(run), _anchored(run), run.bond_i, run.bond_j, run.bond_kn,
                               run.bond_ks, run.gravity)
@@ -369,7 +390,7 @@ def viscous_coefficient(run, value):
     """c [N s/m] of a force -c v on every free sphere that damps the run's first mode (first_mode) at the ratio
     of critical damping `value` (a number, or "critical" = 1): c = 2 zeta m_mean omega_1. ValueError (a message
     for the user) when the value is not a ratio or the model has no first mode."""
-    from dda.spheres import viscous_coefficient as network_coefficient
+    from dda.spheres import viscous_coefficient as network_coefficient  # lazy: numba (see the top)
 
     return network_coefficient(damping_ratio(value), run.centers, _mass(run), _anchored(run), run.bond_i,
                                run.bond_j, run.bond_kn, run.bond_ks, run.gravity)
@@ -399,8 +420,7 @@ def from_scene(path, max_steps=None, duration=None, dt=None, limit_steps=True):
     The run's steps at `duration` and `dt` (the --duration and --dt overrides; default the scene's) are checked
     against the step limit (`max_steps`, the --max-steps value, else the scene's; :func:`check_steps`) unless
     `limit_steps` is false (exports that run nothing: pfc-text, vtu)."""
-    from dda.scene import load_scene
-    from sgim.scene import SceneError
+    from dda.scene import load_scene  # lazy: numba (see the top)
 
     scene = load_scene(path)
     if not scene.spheres:
@@ -423,8 +443,6 @@ def from_scene(path, max_steps=None, duration=None, dt=None, limit_steps=True):
     except SpecError as exc:
         raise SceneError(Path(path), "spheres.model", sp.get("path"), str(exc).split(": ", 1)[-1]) from None
     run.liggghts_joints = sp.get("liggghts_joints", "contact")
-    from .liggghts import open_joint_problem
-
     if open_joint_problem(run):
         raise SceneError(Path(path), "spheres.liggghts_joints", "open", open_joint_problem(run))
     vd = getattr(scene, "viscous_damping", 0.0)
@@ -444,8 +462,6 @@ def check_steps(run, path, max_steps=None, scene=None, duration=None, dt=None):
     [simulation] max_steps, else dda.limits.DEFAULT_MAX_STEPS. With the DDA `scene` the message names its keys
     (simulation.duration, simulation.dt or the stiffness that sets the critical step); otherwise --duration and
     --dt (a model or run.npz has no scene keys). Returns the steps."""
-    from dda.limits import check, sphere_bond_key, sphere_dt_source
-
     dur = float(run.duration if duration is None else duration)
     step = float(run.dt if dt is None else dt)
     dkey = "--duration" if duration is not None or scene is None else "simulation.duration"

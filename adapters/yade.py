@@ -61,6 +61,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sgim.readback import BadFile, Fields, read_json, read_npz
+
 from .process import EngineError, describe_failure, find_engine, run_process, unbuffered
 from .result import COMPLETE, INCOMPLETE, RunResult
 from .spec import SpecError, SphereRun, liggghts_only
@@ -112,10 +114,21 @@ def write_deck(run: SphereRun, folder, *, dump_bonds=False, detection_factor=1.0
     return {"files": ["run.npz", "script.py", "yade.json"], "yade": cfg, "approximations": approximations(run)}
 
 
+def export_deck(run: SphereRun, folder, variant=None):
+    """The deck writer of the registry (adapters/registry.py): write_deck with its defaults (one variant, JCFpm)."""
+    return write_deck(run, folder)
+
+
+def check_deck(deck):
+    """The deck reader of the registry: the deck's run.npz and yade.json read back and checked (BadFile for a
+    broken file) before YADE starts; returns the SphereRun."""
+    run = SphereRun.load(Path(deck) / "run.npz")
+    read_config(Path(deck) / "yade.json")
+    return run
+
+
 def read_config(path):
     """yade.json of a YADE sphere deck (the keys yade_script.py reads), validated: BadFile for a broken file."""
-    from sgim.readback import Fields, read_json
-
     F = Fields(path, read_json(path, "a yade.json"))
     if "detection_factor" in F.doc:
         F.number("detection_factor", lo=1.0, hi=1.2)
@@ -126,10 +139,8 @@ def read_config(path):
     return F.doc
 
 
-def _load(path, keys=(), engine="yade"):
+def load_output(path, keys=(), engine="yade"):
     """The arrays of an npz the YADE script wrote; a broken one (or one without `keys`) is an EngineError."""
-    from sgim.readback import BadFile, read_npz
-
     try:
         arrays = read_npz(path, "an npz written by the YADE script")
     except BadFile as exc:
@@ -146,7 +157,7 @@ def _result(folder, out, outcome, np_):
     run = SphereRun.load(folder / "run.npz")
     n, m = run.n, run.n_bonds
     x0 = np.asarray(run.centers, float)
-    series = _load(out / "yade_series.npz", ("time", "kinetic", "bonds_intact")) \
+    series = load_output(out / "yade_series.npz", ("time", "kinetic", "bonds_intact")) \
         if (out / "yade_series.npz").exists() else None
     t = np.asarray(series["time"], float) if series else np.zeros(0)
     ser = {"kinetic": np.asarray(series["kinetic"], float),
@@ -161,8 +172,6 @@ def _result(folder, out, outcome, np_):
         ser = {k: v[:len(t)] for k, v in ser.items()}
     setup = {}
     if (out / "yade_setup.json").exists():
-        from sgim.readback import BadFile, read_json
-
         try:
             setup = read_json(out / "yade_setup.json", "a yade_setup.json")
         except BadFile as exc:
@@ -171,7 +180,8 @@ def _result(folder, out, outcome, np_):
              "log": str(out / "yade.log")}
     final = out / "yade_final.npz"
     if outcome.ok and final.exists():
-        f = _load(final, ("wall_run", "tens_cracks", "shear_cracks", "final_pos", "final_vel", "bond_intact", "steps"))
+        f = load_output(final, ("wall_run", "tens_cracks", "shear_cracks", "final_pos", "final_vel", "bond_intact",
+                                "steps"))
         extra["wall_run_s"] = float(f["wall_run"])
         extra["cracks"] = {"tension": int(f["tens_cracks"]), "shear": int(f["shear_cracks"])}
         return RunResult(engine="yade", x0=x0, final_pos=f["final_pos"], final_vel=f["final_vel"],
@@ -181,7 +191,7 @@ def _result(folder, out, outcome, np_):
     fp, fv, bi, steps = x0.copy(), np.zeros_like(x0), np.ones(m, bool), 0
     snap = out / "yade_snapshot.npz"
     if snap.exists():
-        s = _load(snap, ("pos", "vel", "bond_intact", "steps"))
+        s = load_output(snap, ("pos", "vel", "bond_intact", "steps"))
         fp, fv, bi, steps = s["pos"], s["vel"], s["bond_intact"].astype(bool), int(s["steps"])
         extra["final_from"] = f"snapshot at step {steps}"
     if pos is not None and len(pos) and len(t) and t[-1] > steps * run.dt:
@@ -239,16 +249,5 @@ def finish(res, engine, outcome, log, out):
     return res
 
 
-__all__ = ["write_deck", "run_deck", "approximations", "write_polyhedra_deck", "run_polyhedra_deck"]
-
-
-def write_polyhedra_deck(scene_path, folder, **kw):
-    from .yade_poly import write_polyhedra_deck as w
-
-    return w(scene_path, folder, **kw)
-
-
-def run_polyhedra_deck(folder, out, np=1, timeout=None, progress=None):
-    from .yade_poly import run_polyhedra_deck as r
-
-    return r(folder, out, np=np, timeout=timeout, progress=progress)
+__all__ = ["write_deck", "export_deck", "check_deck", "read_config", "run_deck", "run_script", "finish", "load_output",
+           "approximations"]

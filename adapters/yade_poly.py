@@ -41,15 +41,23 @@ limit (cases/scenes/crossval/block_wedge.toml, friction 10 degrees) the same wed
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from dda.limits import block_dt_source, check
+from dda.polyhedra import mass_properties
+from sgim.common import SceneError
+from sgim.readback import Arrays, Fields, read_json, read_npz
+
 from .process import EngineError, find_engine
 from .result import COMPLETE, INCOMPLETE, RunResult
+from .yade import finish, load_output, run_script
 
 SCRIPT = Path(__file__).with_name("yade_poly_script.py")
 OUTPUTS = ("yade_series.npz", "yade_final.npz")
@@ -65,8 +73,6 @@ def polyhedra_steps(scene, scene_path, dt=None, duration=None, max_steps=None):
     """(dt, duration) of the polyhedra deck of the DDA block scene `scene`: dt given (--dt), the scene's
     [simulation] dt, or the in-house critical step; SceneError when duration / dt passes the step limit
     (`max_steps`, the --max-steps value, else the scene's; dda/limits.py)."""
-    from dda.limits import block_dt_source, check
-
     duration = float(duration if duration is not None else scene.duration)
     kw = dict(max_steps=max_steps, scene=scene,
               duration_key="--duration" if duration != scene.duration else "simulation.duration")
@@ -90,9 +96,7 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
     `dt`, `duration`, `record_every`, `young` override the scene's values (young: the YADE PolyhedraMat
     modulus, default from [contact] kn as in the module docstring). `scene`: the DDAScene of `scene_path` when
     already loaded; `max_steps`: the step limit (polyhedra_steps)."""
-    from dda.polyhedra import mass_properties
-    from dda.scene import load_scene
-    from sgim.scene import SceneError
+    from dda.scene import load_scene  # lazy: dda.scene loads numba (this module stays light for the registry)
 
     scene_path = Path(scene_path)
     scene = scene if scene is not None else load_scene(scene_path)
@@ -155,11 +159,32 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
             "approximations": approx}
 
 
+def prepare_deck(scene_path, overrides=None, max_steps=None):
+    """The registry's check before the deck folder is made (adapters/registry.py): the DDA scene read, and the
+    deck's dt and duration (`overrides` duration, dt, record_every; polyhedra_steps refuses a run past the step
+    limit). Returns (scene, keywords of write_polyhedra_deck)."""
+    from dda.scene import load_scene  # lazy: as in write_polyhedra_deck
+
+    scene = load_scene(scene_path)
+    ov = {k: v for k, v in (overrides or {}).items() if k in ("duration", "dt", "record_every") and v is not None}
+    ov["dt"], ov["duration"] = polyhedra_steps(scene, scene_path, ov.get("dt"), ov.get("duration"), max_steps)
+    return scene, ov
+
+
+def export_deck(scene_path, folder, prepared):
+    """The registry's deck writer: write_polyhedra_deck with what prepare_deck found."""
+    scene, ov = prepared
+    return write_polyhedra_deck(scene_path, folder, **ov, scene=scene)
+
+
+def check_deck(deck):
+    """The registry's deck reader: check_polyhedra_deck (nothing returned: a block deck has no SphereRun)."""
+    check_polyhedra_deck(deck)
+
+
 def check_polyhedra_deck(folder):
     """(poly.json dict, blocks.npz arrays) of a polyhedra deck, validated before YADE starts (the keys and arrays
     yade_poly_script.py reads): BadFile naming the file and the first defect."""
-    from sgim.readback import Arrays, Fields, read_json, read_npz
-
     folder = Path(folder)
     path = folder / "poly.json"
     F = Fields(path, read_json(path, "a poly.json"))
@@ -191,9 +216,7 @@ def check_polyhedra_deck(folder):
 
 
 def _load(path, keys=()):
-    from .yade import _load as load
-
-    return load(path, keys, engine="yade-polyhedra")
+    return load_output(path, keys, engine="yade-polyhedra")
 
 
 def _result(folder, out, outcome, np_):
@@ -224,8 +247,6 @@ def _result(folder, out, outcome, np_):
 def run_polyhedra_deck(folder, out, np=1, timeout=None, progress=None) -> RunResult:
     """Run a YADE polyhedra deck; returns the RunResult (also saved into `out`); EngineError on failure,
     with the partial result (marked incomplete, saved into `out`)."""
-    from .yade import run_script
-
     exe = find_engine("yade")
     folder, out = Path(folder).resolve(), Path(out).resolve()
     for need in ("script.py", "blocks.npz", "poly.json"):
@@ -233,19 +254,12 @@ def run_polyhedra_deck(folder, out, np=1, timeout=None, progress=None) -> RunRes
             raise EngineError(f"yade-polyhedra: {folder}: not a YADE polyhedra deck (missing {need})")
     outcome, log = run_script(exe, folder, out, OUTPUTS, np=np, timeout=timeout, progress=progress,
                               tag="yade-polyhedra")
-    from .yade import finish
-
     return finish(_result(folder, out, outcome, np), "yade-polyhedra", outcome, log, out)
 
 
 def main(argv=None):
     """``python -m adapters.yade_poly SCENE [--duration T] [--dt DT] [-o OUT]``: write the polyhedra deck of a
     DDA block scene, run it in YADE and print each free block's displacement."""
-    import argparse
-    import tempfile
-
-    from sgim.scene import SceneError
-
     ap = argparse.ArgumentParser(prog="python -m adapters.yade_poly", description=main.__doc__)
     ap.add_argument("scene")
     ap.add_argument("--duration", type=float)
@@ -269,7 +283,8 @@ def main(argv=None):
     return 0
 
 
-__all__ = ["write_polyhedra_deck", "run_polyhedra_deck", "check_polyhedra_deck"]
+__all__ = ["write_polyhedra_deck", "run_polyhedra_deck", "check_polyhedra_deck", "polyhedra_steps", "prepare_deck",
+           "export_deck", "check_deck"]
 
 if __name__ == "__main__":
     raise SystemExit(main())
