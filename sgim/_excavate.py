@@ -25,6 +25,7 @@ Several surfaces with different rules are merged into one facet set.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
@@ -41,6 +42,12 @@ RULE_EXACT = 1.0
 # exactly r (common: lattice layers at z.5 under berms at whole metres with r = 0.5) is
 # kept, as the strict inequality says, instead of being removed or kept by rounding.
 ROUND = 1e-12
+
+# the facet records (pc, ec, fb; see above) binned on a plan grid: the first entry of each cell
+# (cell_start) in cell_facets, the grid's origin (g0x, g0y), cell size gs and cells gnx x gny
+Bins = namedtuple("Bins", "pc ec fb cell_start cell_facets g0x g0y gs gnx gny")
+# the sites of a column family: z = za + zb (c0 + c1 m), m = 0 .. nz - 1 (sgim/packing.py)
+Steps = namedtuple("Steps", "za zb c0 c1 nz")
 
 
 @njit(cache=True, inline="always")
@@ -195,8 +202,9 @@ def _certainly_inside_plan(pc, ec, fb, f, x, y, z, tol):
 
 
 @njit(cache=True)
-def _column_bounds(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny, x, y, r, eps, tol):
+def _column_bounds(B, x, y, r, eps, tol):
     """(zlo, zhi, cell): sites below zlo are kept, sites at/above zhi removed, in between tested."""
+    pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny = B
     zlo = np.inf
     zhi = np.inf
     # clamp like bin_facets: a column on the box face may round one ulp past the grid
@@ -233,11 +241,11 @@ def _first_at_or_above(za, zb, c0, c1, nz, zval):
 
 
 @njit(cache=True)
-def _column_pass(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
-                 x, y, za, zb, c0, c1, nz, r, eps, tol, out, pos):
-    """Count (out is None) or write the kept sites of one column; returns the count."""
-    zlo, zhi, cell = _column_bounds(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
-                                    x, y, r, eps, tol)
+def _column_pass(B, x, y, steps, r, eps, tol, out, pos):
+    """Count (out is None) or write the kept sites of one column (B: Bins, steps: Steps); returns the count."""
+    pc, ec, fb, cell_start, cell_facets = B.pc, B.ec, B.fb, B.cell_start, B.cell_facets
+    za, zb, c0, c1, nz = steps
+    zlo, zhi, cell = _column_bounds(B, x, y, r, eps, tol)
     mlo = _first_at_or_above(za, zb, c0, c1, nz, zlo)
     mhi = max(mlo, _first_at_or_above(za, zb, c0, c1, nz, zhi))
     n = 0
@@ -268,21 +276,17 @@ def _column_pass(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
 
 
 @njit(cache=True, parallel=True)
-def count_columns(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
-                  cx, cy, za, zb, c0, c1, nz, r, eps, tol):
+def count_columns(B, cx, cy, steps, r, eps, tol):
     counts = np.empty(len(cx), np.int64)
     for i in prange(len(cx)):
-        counts[i] = _column_pass(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
-                                 cx[i], cy[i], za, zb, c0, c1, nz, r, eps, tol, None, 0)
+        counts[i] = _column_pass(B, cx[i], cy[i], steps, r, eps, tol, None, 0)
     return counts
 
 
 @njit(cache=True, parallel=True)
-def fill_columns(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
-                 cx, cy, za, zb, c0, c1, nz, r, eps, tol, offsets, out):
+def fill_columns(B, cx, cy, steps, r, eps, tol, offsets, out):
     for i in prange(len(cx)):
-        _column_pass(pc, ec, fb, cell_start, cell_facets, g0x, g0y, gs, gnx, gny,
-                     cx[i], cy[i], za, zb, c0, c1, nz, r, eps, tol, out, offsets[i])
+        _column_pass(B, cx[i], cy[i], steps, r, eps, tol, out, offsets[i])
 
 
 @njit(cache=True)

@@ -97,7 +97,8 @@ def colours(n, mem: Membership):
 def touching_pairs(centres, radii, grid: SphereGrid, tol):
     if len(radii) and float(radii.max()) > 2.0 * float(radii.min()):
         # unequal radii: a uniform grid of cell 2 r_max holds too many small spheres per cell;
-        # the multi-level grid of sgim/rpack.py gives the same pairs in the same order
+        # the multi-level grid of sgim/rpack.py gives the same pairs in the same order (imported here: the
+        # random packer's modules load only when needed, as in sgim/builder.py)
         from .rpack import contact_pairs
 
         return contact_pairs(centres, radii, tol)

@@ -72,10 +72,10 @@ def kept_sites(lattice: Lattice, facets: FacetSet, lo, hi, progress=None):
     gny = int((hi[1] - lo[1]) / gs) + 1
     pad = r + 2 * eps + 1e-9 * span
     cell_start, cell_facets = K.bin_facets(facets.fb, lo[0], lo[1], gs, gnx, gny, pad)
+    bins = K.Bins(facets.pc, facets.ec, facets.fb, cell_start, cell_facets, lo[0], lo[1], gs, gnx, gny)
     parts = []
     for fam in lattice.families:
-        args = (facets.pc, facets.ec, facets.fb, cell_start, cell_facets, lo[0], lo[1], gs, gnx, gny,
-                fam.cx, fam.cy, fam.za, fam.zb, fam.c0, fam.c1, fam.nz, r, eps, tol)
+        args = (bins, fam.cx, fam.cy, K.Steps(fam.za, fam.zb, fam.c0, fam.c1, fam.nz), r, eps, tol)
         counts = K.count_columns(*args)
         offsets = np.zeros(len(counts) + 1, np.int64)
         np.cumsum(counts, out=offsets[1:])

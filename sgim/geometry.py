@@ -63,7 +63,7 @@ def facet_degeneracies(verts, faces):
 
 def triangulate_plan(points):
     """Triangulate points in plan view (Delaunay on x, y); returns (vertices, faces)."""
-    from scipy.spatial import Delaunay, QhullError
+    from scipy.spatial import Delaunay, QhullError  # loaded only when needed (start-up time)
 
     pts = np.asarray(points, float)
     if len(pts) < 3:
@@ -92,7 +92,7 @@ def triangulate_plan(points):
 
 def load_mesh_file(path):
     """Read a triangle surface from any meshio format; merge duplicated vertices."""
-    import meshio
+    import meshio  # loaded only when a mesh file is read (start-up time)
 
     path = Path(path)
     if not path.is_file():

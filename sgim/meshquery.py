@@ -89,6 +89,7 @@ def _edge_table(F, nv):
 
 def _components(n, pairs):
     """Connected components of n nodes joined by index pairs (k,2): labels (n,)."""
+    # scipy loaded only when a mesh is cleaned (start-up time), here and in TriMesh
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
