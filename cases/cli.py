@@ -2,6 +2,8 @@
 (batch studies, cases/lib/study.py)."""
 from __future__ import annotations
 
+import argparse
+import importlib
 import sys
 
 # command -> (module with main(argv), one line of help)
@@ -27,16 +29,12 @@ def main(argv=None):
         print(_usage())
         return 0
     if argv and argv[0] == "--version":
-        import argparse
-
-        from sgim.common import add_version
+        from sgim.common import add_version  # lazy: `cases --help` answers without importing sgim
 
         add_version(argparse.ArgumentParser(prog="cases")).parse_args(["--version"])
     if not argv or argv[0] not in COMMANDS:
         print(_usage(), file=sys.stderr)
         return 2
-    import importlib
-
     return importlib.import_module(COMMANDS[argv[0]][0]).main(argv[1:])
 
 

@@ -179,7 +179,7 @@ def test_report_one_parameter_sweep(tmp_path):
 # --------------------------------------------------------------------------------------------- issue 17, point 9
 def _capture(monkeypatch):
     """What every saved figure shows: titles, axis labels and scales, colour norms (read from matplotlib)."""
-    import cases.lib.report as rp
+    import cases.lib.figures as rp
 
     seen = {}
     real = rp._save
@@ -239,7 +239,7 @@ def test_report_units_names_titles_inputs_and_timing_apart(tmp_path, monkeypatch
 
 
 def test_pole_projection_equal_area_lower_hemisphere():
-    from cases.lib.report import pole_projection
+    from cases.lib.figures import pole_projection
 
     # a horizontal plane's pole is vertical: the centre; a vertical plane dipping east has a horizontal pole
     # pointing west: on the primitive circle (radius sqrt 2 sin 45 = 1) at the west; dip 60 towards north: the

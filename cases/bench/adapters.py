@@ -37,15 +37,20 @@ import json
 import math
 import os
 import re
+import resource
 import shutil
 import statistics
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from sgim.machine import machine_info, machine_line
+
+# The code it times (sgim, dda, adapters: numba kernels) is imported inside the functions of each part, so that
+# `--help` loads none of it and each part loads only what it runs.
 
 RADIUS = 0.01
 DENSITY = {"fcc": 0.7405, "random": 0.62}  # solid fraction of sgim's packings (random: measured)
@@ -84,8 +89,6 @@ LABELS = {"dda": "dda (normal+shear bonds)", "dda-central": "dda (central bonds,
 
 def central_run(run):
     """The same run with central-spring bonds (bond_ks = 0, as LIGGGHTS' harmonic bonds), same time step."""
-    from dataclasses import replace
-
     return replace(run, bond_ks=np.zeros_like(np.asarray(run.bond_ks, float)))
 
 
@@ -137,8 +140,6 @@ SHORT = 5  # steps of the short LIGGGHTS deck whose CPU time (start-up, reading 
 
 def liggghts_decks(run, tmp):
     """The deck of the run and the same deck SHORT steps long."""
-    from dataclasses import replace
-
     from adapters.deck import export
 
     decks = []
@@ -150,8 +151,6 @@ def liggghts_decks(run, tmp):
 
 
 def _children_cpu():
-    import resource
-
     u = resource.getrusage(resource.RUSAGE_CHILDREN)
     return u.ru_utime + u.ru_stime
 

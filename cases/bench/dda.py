@@ -29,6 +29,9 @@ from cases import SCENES
 from dda.shapes import box as _box
 from sgim.machine import machine_line
 
+# The DDA engine (simulation, system, generators: numba kernels) is imported inside the functions of each part, so
+# that `--help` loads none of it and a part run alone loads only what it times.
+
 G = 9.81
 
 

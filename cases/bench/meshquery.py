@@ -27,6 +27,9 @@ from sgim import shapes
 from sgim.machine import machine_info, machine_line
 from sgim.meshquery import TriMesh
 
+# The code it times and its peers (sgim's builder, pyvista, vtk) are imported inside the functions of each part,
+# so that `--help` loads none of them and each part loads only what it runs.
+
 
 
 def timed(fn, repeat):

@@ -56,6 +56,9 @@ import numpy as np
 from cases import SCENES
 from sgim.machine import machine_info, machine_line
 
+# sgim's packing code (numba kernels) is imported inside the functions of each part, so that `--help` loads none
+# of it and each part loads only what it times.
+
 REPO = Path(__file__).resolve().parents[2]
 GRADED_PIT = SCENES / "open_pit_graded.toml"
 T0 = time.perf_counter()

@@ -22,6 +22,8 @@ import numpy as np
 from cases.bench.dda import _box
 from sgim.machine import machine_line
 
+# The DDA engine (spheres, system, simulation: numba kernels) is imported inside the functions that time it.
+
 
 def _scene(k, fixed_cubes=False):
     from dda.spheres import SphereSet

@@ -14,7 +14,8 @@ stderr), then ``fn(scene_path, case_dir, params)``; the answer (status, error, r
 pipe, then ``os._exit``. The server enforces the time limit (SIGKILL to the group: status "timeout") and reports
 a child that dies without answering ("died", with the signal) so that the rank can hand the case out again.
 
-Only the standard library is imported here (and the evaluator's module): a small server forks faster.
+Only the standard library is imported here (and the evaluator's module, when the first request names it, with the
+registry cases/lib/evaluators.py): a small server forks faster.
 """
 from __future__ import annotations
 
@@ -117,7 +118,7 @@ def _pdeathsig():
     global _PRCTL
     try:
         if _PRCTL is None:
-            import ctypes
+            import ctypes  # lazy: only on the first call (see the module doc)
 
             _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
         _PRCTL(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
@@ -201,7 +202,7 @@ class _Spare:
                     key = (req["engine"], req["study_dir"])
                     fn = fns.get(key)
                     if fn is None:
-                        from cases.lib.evaluators import resolve_evaluator
+                        from cases.lib.evaluators import resolve_evaluator  # lazy: see the module doc
 
                         fn = resolve_evaluator(*key).fn
                     _send(ans_w, _run_case(req, fn, saved_err))
@@ -290,7 +291,7 @@ def main():
                 return 0
             key = (req["engine"], req["study_dir"])
             if key not in fns:
-                from cases.lib.evaluators import resolve_evaluator
+                from cases.lib.evaluators import resolve_evaluator  # lazy: see the module doc
 
                 ev = resolve_evaluator(*key)
                 fns[key] = ev.fn

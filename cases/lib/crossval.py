@@ -44,12 +44,17 @@ import shutil
 import sys
 import tempfile
 import time
+import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from cases import SCENES
+from cases.make.crossval import WEDGE
+
+# The engines (adapters, dda, scipy) are imported inside the functions that use them: `cases crossval --help`
+# and the evaluators that use a reference of this module (detached_reference) load no engine they do not run.
 
 CV = SCENES / "crossval"
 ENGINES = ("dda", "yade", "liggghts")
@@ -305,7 +310,6 @@ def _wedge_line(w):
 def case_wedge(engines, work, say, timeout, iterations=6):
     """Bisection of the sphere wedge's joint friction between 0.85 and 1.15 x Hoek & Bray's critical angle."""
     from adapters.spec import from_scene
-    from cases.make.crossval import WEDGE
 
     path = CV / "wedge.toml"
     base = from_scene(path)
@@ -386,7 +390,6 @@ def _along(res, wedge, weight, line, T):
 
 
 def _dda_block_wedge(phi_c, say):
-    from cases.make.crossval import WEDGE
     from dda.wedge import dda_critical_friction
 
     t0 = time.perf_counter()
@@ -445,8 +448,6 @@ def case_blocks(engines, work, say, timeout):
 
 
 def _generate_params(scene):
-    import tomllib
-
     data = tomllib.loads(scene.text)
     gen = data["generate"][0]
     return {k: gen[k] for k in ("joint_a", "joint_b", "face", "height")}

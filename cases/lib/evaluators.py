@@ -65,15 +65,23 @@ before any case. The registry: :func:`registry` (the framework's noop / sleep / 
 """
 from __future__ import annotations
 
+import importlib
+import inspect
 import json
 import math
+import sys
 import time
 import tomllib
 from dataclasses import dataclass, field
+from importlib.machinery import PathFinder
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
+
+# Each evaluator imports its engine (sgim, dda, adapters: numba kernels; scipy) inside its own functions: the
+# case server imports this registry once, and a study then loads only the engine of its evaluator (noop, sleep
+# and spin load none), which keeps the fork of every case small and `cases study list` fast.
 
 G = 9.81
 NAN = float("nan")
@@ -696,9 +704,6 @@ def resolve_evaluator(name, study_dir=None):
     Raises LookupError with a one-line reason for an unknown name, a module that cannot be imported (missing,
     a syntax error, an exception while it runs) and a name that is not a function."""
     if ":" in name:
-        import importlib
-        import sys
-
         mod_name, _, attr = name.partition(":")
         if not mod_name or not attr:
             raise LookupError("must be 'module:function'")
@@ -734,8 +739,6 @@ def _study_module_file(mod_name, study_dir):
     """The file of top-level module `mod_name` in the study's folder (None when it is not there)."""
     if study_dir is None or "." in mod_name:
         return None
-    from importlib.machinery import PathFinder
-
     try:
         spec = PathFinder.find_spec(mod_name, [str(study_dir)])
     except (ImportError, ValueError):
@@ -745,8 +748,6 @@ def _study_module_file(mod_name, study_dir):
 
 def module_file(ev):
     """The source file of an evaluator's function (None when it has none)."""
-    import inspect
-
     try:
         f = inspect.getsourcefile(ev.fn)
     except TypeError:

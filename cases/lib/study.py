@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import hashlib
 import itertools
 import json
 import math
@@ -57,14 +58,19 @@ import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from statistics import NormalDist
 
 import numpy as np
 
+from adapters.process import EngineError, find_engine
 from sgim.common import EXIT_BAD_INPUT, CliError, SceneError, run_command
 from sgim.common import progress_printer as _progress
+from sgim.geometry import dip_to_normal, normal_to_dip
 
+from ._batch import Terminated, run_study, world
 from .evaluators import BUILTIN, Evaluator, _as_evaluator, _noop, _sleep, _spin, module_file, registry, \
     resolve_evaluator  # noqa: F401 - re-exported
+from .report import write_report
 
 STUDY_KEYS = {"name", "description", "base", "evaluator", "engine", "results", "units", "seed", "timeout",
               "parameters", "sampling"}
@@ -127,8 +133,6 @@ class Study:
     def fingerprint(self):
         """{what: sha256 of its bytes}: the study file, the base scene, every file the base scene names and the
         evaluator's module source. A restart compares it with the one in OUTDIR/study.json."""
-        import hashlib
-
         def digest(p):
             try:
                 return hashlib.sha256(Path(p).read_bytes()).hexdigest()
@@ -250,14 +254,7 @@ def _absolutise(scene, base_dir, found=None):
 def load_study(path, check_engine=True) -> Study:
     """Read and validate a study file; raise SceneError (one line) on any problem. Nothing is run."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(path, "(file)", str(path), f"cannot read study file ({exc.__class__.__name__})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(path, "(toml)", str(exc).split("\n")[0], "not valid TOML") from None
+    data = _read_toml(path)
 
     def err(key, value, message):
         raise SceneError(path, key, value, message)
@@ -268,6 +265,46 @@ def load_study(path, check_engine=True) -> Study:
     name = data.get("name", path.stem)
     if not isinstance(name, str) or not name:
         err("name", name, "must be a non-empty string")
+    base, base_scene, files = _read_base(path, data, err)
+    engine, ev, needs = _read_evaluator(path, data, err, check_engine)
+    results, units, seed, timeout = _read_outputs(data, err)
+
+    ptab = data.get("parameters", {})
+    if not isinstance(ptab, dict):
+        err("parameters", ptab, "must be a table of parameter paths")
+    params = []
+    for ppath, spec in ptab.items():
+        key = f'parameters."{ppath}"'
+        params.append(_read_param(err, key, ppath, spec, base_scene, base))
+    method, samples = _read_sampling(data, err, params)
+
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        err("description", description, "must be a string")
+    all_units = {**(dict(ev.units) if ev is not None else {}), **units}
+    study = Study(path=path.resolve(), name=name, base=base, base_scene=base_scene, engine=engine, results=results,
+                  seed=seed, timeout=float(timeout) if timeout is not None else None, method=method,
+                  samples=samples, params=params, needs=tuple(needs), units=all_units, files=files,
+                  description=description)
+    _find_value_files(study, params, [path.resolve().parent, base.parent], files)
+    study.cases = make_cases(study)
+    return study
+
+
+def _read_toml(path):
+    """The tables of the study file at `path`; SceneError when it cannot be read or is not TOML."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(path, "(file)", str(path), f"cannot read study file ({exc.__class__.__name__})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "(toml)", str(exc).split("\n")[0], "not valid TOML") from None
+
+
+def _read_base(path, data, err):
+    """(base scene path, its tables, the files it names) of the study's ``base``."""
     if "base" not in data:
         err("base", None, "missing value (the base scene file, relative to the study file)")
     base_rel = data["base"]
@@ -287,8 +324,11 @@ def load_study(path, check_engine=True) -> Study:
         err("base", base_rel, f"cannot read the base scene {base} ({exc.__class__.__name__})")
     except tomllib.TOMLDecodeError as exc:
         err("base", base_rel, f"base scene is not valid TOML ({str(exc).splitlines()[0]})")
-    files = _absolutise(base_scene, base.parent)
+    return base, base_scene, _absolutise(base_scene, base.parent)
 
+
+def _read_evaluator(path, data, err, check_engine):
+    """(evaluator name, Evaluator or None without `check_engine`, the programs it needs) of the study."""
     if "engine" in data and "evaluator" in data:
         err("engine", data["engine"], "give the evaluator once: `evaluator =` (engine is its former name)")
     ekey = "engine" if "engine" in data else "evaluator"
@@ -305,13 +345,15 @@ def load_study(path, check_engine=True) -> Study:
             err(ekey, engine, str(exc))
         needs = ev.needs
         for exe in needs:
-            from adapters.process import EngineError, find_engine
-
             try:
                 find_engine(exe)
             except EngineError as exc:
                 err(ekey, engine, f"needs {exc}")
+    return engine, ev, needs
 
+
+def _read_outputs(data, err):
+    """(results, units, seed, timeout) of the study."""
     results = data.get("results", [])
     if not isinstance(results, list) or not all(isinstance(r, str) and r for r in results):
         err("results", results, "must be a list of result names")
@@ -332,15 +374,11 @@ def load_study(path, check_engine=True) -> Study:
     timeout = data.get("timeout")
     if timeout is not None and (not _is_number(timeout) or not 0 < timeout <= MAX_TIMEOUT):
         err("timeout", timeout, f"must be a number of seconds in (0, {MAX_TIMEOUT:g}]")
+    return results, units, seed, timeout
 
-    ptab = data.get("parameters", {})
-    if not isinstance(ptab, dict):
-        err("parameters", ptab, "must be a table of parameter paths")
-    params = []
-    for ppath, spec in ptab.items():
-        key = f'parameters."{ppath}"'
-        params.append(_read_param(err, key, ppath, spec, base_scene, base))
 
+def _read_sampling(data, err, params):
+    """(method, samples) of the study's [sampling] table, checked against its parameters and the case limit."""
     samp = data.get("sampling", {})
     if not isinstance(samp, dict):
         err("sampling", samp, "must be a table (method, samples)")
@@ -378,18 +416,16 @@ def load_study(path, check_engine=True) -> Study:
     if total > MAX_CASES:
         err("parameters", f"{total} cases", f"more than {MAX_CASES} cases (the product of the axes"
                                            f"{' and the samples' if method in ('random', 'lhs') else ''})")
-    description = data.get("description", "")
-    if not isinstance(description, str):
-        err("description", description, "must be a string")
-    all_units = {**(dict(ev.units) if ev is not None else {}), **units}
-    study = Study(path=path.resolve(), name=name, base=base, base_scene=base_scene, engine=engine, results=results,
-                  seed=seed, timeout=float(timeout) if timeout is not None else None, method=method,
-                  samples=samples, params=params, needs=tuple(needs), units=all_units, files=files,
-                  description=description)
-    for p in params:  # text values of grid / list parameters that name files
+    return method, samples
+
+
+def _find_value_files(study, params, folders, files):
+    """Text values of grid / list parameters that name files (in the study's or the base scene's folder): into
+    ``study.value_files`` and `files` (the study's inputs)."""
+    for p in params:
         for v in (p.spec if p.kind == "grid" else []):
             if isinstance(v, str) and v and len(v) < 4096 and v not in study.value_files:
-                for folder in (path.resolve().parent, base.parent):
+                for folder in folders:
                     cand = Path(v) if Path(v).is_absolute() else folder / v
                     try:
                         if cand.is_file():
@@ -399,8 +435,6 @@ def load_study(path, check_engine=True) -> Study:
                             break
                     except (OSError, ValueError):
                         pass
-    study.cases = make_cases(study)
-    return study
 
 
 def _read_param(err, key, ppath, spec, base_scene, base):
@@ -479,8 +513,6 @@ def fisher_from_uniform(dip, dip_direction, kappa, u, v):
 
     The angle θ from the mean pole has P(θ' <= θ) = (1 - exp(-κ (1 - cos θ))) / (1 - exp(-2κ)); the azimuth
     about the pole is uniform. Poles are returned on the upper hemisphere."""
-    from sgim.geometry import dip_to_normal, normal_to_dip
-
     u, v = np.asarray(u, float), np.asarray(v, float)
     m = dip_to_normal(dip, dip_direction)
     cos_t = 1.0 + np.log1p(-u * (-np.expm1(-2.0 * kappa))) / kappa
@@ -510,8 +542,6 @@ def _unit_draws(rng, method, n, dims):
 
 def make_cases(study: Study):
     """The deterministic case list (see the module doc)."""
-    from statistics import NormalDist
-
     rng = np.random.default_rng(study.seed)
     axes = []
     for p in study.params:
@@ -646,8 +676,6 @@ def _options(args):
 
 
 def cmd_run(args):
-    from ._batch import run_study, world
-
     comm = world()
     rank = comm.rank if comm is not None else 0
     say = _progress(args.quiet or args.json or rank != 0)
@@ -699,8 +727,6 @@ def cmd_report(args):
     out = Path(args.outdir)
     if not (out / "study.json").is_file():
         raise CliError(f"{out}: OUTDIR = {str(out)!r}: no study.json (not a study output folder)")
-    from .report import write_report
-
     path, info = write_report(out, with_summary=True)
     if args.json:
         print(json.dumps(info, indent=1))
@@ -752,8 +778,6 @@ def make_parser():
 
 
 def main(argv=None):
-    from ._batch import Terminated
-
     args = make_parser().parse_args(argv)
     try:
         return run_command("cases study", args)

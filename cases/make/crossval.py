@@ -24,6 +24,9 @@ import numpy as np
 
 from cases import SCENES
 
+# dda is imported inside wedge_cavities() only: the other generators and the modules that read this one's
+# constants (cases/lib/crossval.py) load no DDA engine.
+
 HERE = SCENES / "crossval"
 
 HANG_VARIANTS = {

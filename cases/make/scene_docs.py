@@ -16,6 +16,9 @@ import tempfile
 import tomllib
 from pathlib import Path
 
+# The scene-doc recorders (sgim.scenedoc, dda.scenedoc: every reader of the project) are imported inside the
+# functions that use them, so that the module's constants load without them.
+
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "scenes.md"
 COMMAND = "python -m cases.make.scene_docs"
