@@ -18,6 +18,9 @@ from pathlib import Path
 from sgim.common import FORCE_HELP, CliError, add_version, positive_int, progress_printer, run_command
 from sgim.outdir import output_folder
 
+# The commands import the package's other modules inside their functions: `sgim --help`, --version and the refusal
+# of a bad command line load neither numpy nor numba, and a bad scene is refused before the build's kernels load.
+
 
 def cmd_build(args):
     from .scene import OUTPUT_FORMATS, load_scene
