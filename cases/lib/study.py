@@ -66,6 +66,7 @@ from adapters.process import EngineError, find_engine
 from sgim.common import EXIT_BAD_INPUT, CliError, SceneError, run_command
 from sgim.common import progress_printer as _progress
 from sgim.geometry import dip_to_normal, normal_to_dip
+from sgim.reader import SceneReader, read_toml
 
 from ._batch import Terminated, run_study, world
 from .evaluators import BUILTIN, Evaluator, _as_evaluator, _noop, _sleep, _spin, module_file, registry, \
@@ -254,14 +255,10 @@ def _absolutise(scene, base_dir, found=None):
 def load_study(path, check_engine=True) -> Study:
     """Read and validate a study file; raise SceneError (one line) on any problem. Nothing is run."""
     path = Path(path)
-    data = _read_toml(path)
-
-    def err(key, value, message):
-        raise SceneError(path, key, value, message)
-
-    for k in data:
-        if k not in STUDY_KEYS:
-            err(k, data[k], f"unknown key (allowed: {', '.join(sorted(STUDY_KEYS))})")
+    data, _ = read_toml(path, what="study file")
+    rd = SceneReader(path)  # every message: SceneError(path, key, value, message), as in the scene readers
+    err = rd.err
+    rd.known(data, STUDY_KEYS, "")
     name = data.get("name", path.stem)
     if not isinstance(name, str) or not name:
         err("name", name, "must be a non-empty string")
@@ -276,7 +273,7 @@ def load_study(path, check_engine=True) -> Study:
     for ppath, spec in ptab.items():
         key = f'parameters."{ppath}"'
         params.append(_read_param(err, key, ppath, spec, base_scene, base))
-    method, samples = _read_sampling(data, err, params)
+    method, samples = _read_sampling(data, rd, params)
 
     description = data.get("description", "")
     if not isinstance(description, str):
@@ -289,18 +286,6 @@ def load_study(path, check_engine=True) -> Study:
     _find_value_files(study, params, [path.resolve().parent, base.parent], files)
     study.cases = make_cases(study)
     return study
-
-
-def _read_toml(path):
-    """The tables of the study file at `path`; SceneError when it cannot be read or is not TOML."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(path, "(file)", str(path), f"cannot read study file ({exc.__class__.__name__})") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(path, "(toml)", str(exc).split("\n")[0], "not valid TOML") from None
 
 
 def _read_base(path, data, err):
@@ -377,14 +362,13 @@ def _read_outputs(data, err):
     return results, units, seed, timeout
 
 
-def _read_sampling(data, err, params):
+def _read_sampling(data, rd, params):
     """(method, samples) of the study's [sampling] table, checked against its parameters and the case limit."""
+    err = rd.err
     samp = data.get("sampling", {})
     if not isinstance(samp, dict):
         err("sampling", samp, "must be a table (method, samples)")
-    for k in samp:
-        if k not in ("method", "samples"):
-            err(f"sampling.{k}", samp[k], "unknown key (allowed: method, samples)")
+    rd.known(samp, ("method", "samples"), "sampling")
     sampled = [p for p in params if p.kind in SAMPLED_KINDS]
     default_method = "random" if sampled else ("realisations" if any(p.kind == "realisations" for p in params)
                                                else "grid")
