@@ -31,7 +31,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _rpack as K
+from . import _rpregion as K
+from .meshquery import MeshSet, TriMesh
+from .reader import LENGTH, SIZE
 
 
 @dataclass
@@ -80,8 +82,6 @@ def read_grading(rd, gt, key):
     if not isinstance(near, list) or not near or not all(isinstance(x, str) for x in near):
         rd.err(f"{key}.near", near, "must be a non-empty list of names of excavation surfaces, cavities or "
                                     "discontinuities")
-    from .scene import LENGTH, SIZE
-
     rf = rd.number(gt, "fine_radius", f"{key}.fine_radius", positive=True, **SIZE)
     rc = rd.number(gt, "coarse_radius", f"{key}.coarse_radius", positive=True, **SIZE)
     if rc < rf:
@@ -114,8 +114,6 @@ class NearObjects:
     """The named objects of a grading as kernel arrays: meshes (sgim._meshq data + offsets) and discs."""
 
     def __init__(self, scene, grading):
-        from .meshquery import MeshSet, TriMesh
-
         names = set(grading.near)
         meshes, offs = [], []
         dc, dn, dr, dh = [], [], [], []
@@ -157,8 +155,6 @@ def empty_mesh_data():
     """Mesh data with no mesh (the kernels loop over zero meshes)."""
     global _EMPTY
     if _EMPTY is None:
-        from .meshquery import TriMesh
-
         D = TriMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])).kernel_data()
         _EMPTY = D[:12] + (np.zeros(0, np.int64), np.zeros(1, np.int64))
     return _EMPTY

@@ -72,9 +72,17 @@ from numba import njit, prange
 
 from . import _excavate as EX
 from . import _rpack as K
+from . import _rpgrid as RG
+from . import _rpprobe as PR
+from . import _rpregion as RR
+from . import _rpstate as ST
+from .cavities import carve
+from .excavate import FacetSet
+from .geometry import MeshError, load_mesh_file
 from .grading import Grading, NearObjects, empty_mesh_data, read_grading, scene_names
+from .meshquery import MeshSet, TriMesh
 from .portable import norm
-from .scene import SIZE
+from .reader import SIZE
 
 LAWS = ("uniform", "lognormal", "sieve")
 POOL = 32  # pooled radii (a law): each pocket takes the largest that fits
@@ -115,7 +123,7 @@ class RadiusLaw:
         if self.law == "uniform":
             return p["min"] + (p["max"] - p["min"]) * rng.random(n)
         if self.law == "lognormal":
-            from scipy.special import ndtr, ndtri
+            from scipy.special import ndtr, ndtri  # scipy loaded only for a lognormal law (start-up time)
 
             mu, sg = math.log(p["median"]), p["sigma"]
             a = ndtr((math.log(p["min"]) - mu) / sg) if p.get("min") else 0.0
@@ -215,9 +223,6 @@ def read_random(rd, pk, domain, scene_path):
     if 2 * rmax > float(np.min(domain.max - domain.min)):
         rd.err("packing", rmax, f"spheres of diameter {2 * rmax:g} do not fit in the domain")
     if "fill" in pk:
-        from .geometry import MeshError, load_mesh_file
-        from .meshquery import TriMesh
-
         fname = rd.string(pk, "fill", "packing.fill", "")
         fpath = Path(fname)
         if not fpath.is_absolute():
@@ -307,9 +312,6 @@ class Region:
     """
 
     def __init__(self, lo, hi, excavations=(), cavities=(), fill=None):
-        from .excavate import FacetSet
-        from .meshquery import MeshSet, TriMesh
-
         self.lo = np.asarray(lo, float)
         self.hi = np.asarray(hi, float)
         self.exc_meshes = [TriMesh(s.vertices, s.faces, orient=False) for s in excavations]
@@ -327,9 +329,9 @@ class Region:
             gnx = int((self.hi[0] - self.lo[0]) / gs) + 1
             gny = int((self.hi[1] - self.lo[1]) / gs) + 1
             cst, cfa = EX.bin_facets(fs.fb, self.lo[0], self.lo[1], gs, gnx, gny, 1e-9 * span)
-            self.exc = (fs.ec, cst, cfa, float(self.lo[0]), float(self.lo[1]), float(gs), int(gnx), int(gny))
+            self.exc = RR.Exc(fs.ec, cst, cfa, float(self.lo[0]), float(self.lo[1]), float(gs), int(gnx), int(gny))
         else:
-            self.exc = (np.zeros((1, 12)), np.zeros(2, np.int64), np.zeros(0, np.int64), 0.0, 0.0, 1.0, 0, 0)
+            self.exc = _NO_EXC
 
     def bounds(self):
         """Box of the region: the domain, cut to the fill shape's bounding box."""
@@ -405,18 +407,18 @@ class Region:
         return near
 
 
-_NO_EXC = (np.zeros((1, 12)), np.zeros(2, np.int64), np.zeros(0, np.int64), 0.0, 0.0, 1.0, 0, 0)
+_NO_EXC = RR.Exc(np.zeros((1, 12)), np.zeros(2, np.int64), np.zeros(0, np.int64), 0.0, 0.0, 1.0, 0, 0)
 
 
 def _above_many(exc, pts):
-    return _above_kernel(*exc, np.ascontiguousarray(pts))
+    return _above_kernel(exc, np.ascontiguousarray(pts))
 
 
 @njit(cache=True, parallel=True)
-def _above_kernel(ec, cst, cfa, g0x, g0y, gs, gnx, gny, pts):
+def _above_kernel(exc, pts):
     out = np.zeros(pts.shape[0], np.bool_)
     for i in prange(pts.shape[0]):
-        out[i] = K.above_excavation(ec, cst, cfa, g0x, g0y, gs, gnx, gny, pts[i, 0], pts[i, 1], pts[i, 2])
+        out[i] = RR.above_excavation(exc, pts[i, 0], pts[i, 1], pts[i, 2])
     return out
 
 
@@ -446,10 +448,10 @@ def level_grid(lo, hi, rmin, rmax, max_cells=48_000_000):
         dims[k] = d
     coff = np.zeros(nl + 1, np.int64)
     coff[1:] = np.cumsum(np.prod(dims, axis=1))
-    bdims = (dims + K.BLOCK - 1) // K.BLOCK
+    bdims = (dims + RG.BLOCK - 1) // RG.BLOCK
     boff = np.zeros(nl + 1, np.int64)
     boff[1:] = np.cumsum(np.prod(bdims, axis=1))
-    return (org, cs, dims, coff, rlo, rtop.astype(float), bdims, boff)
+    return RG.Grid(org, cs, dims, coff, rlo, rtop.astype(float), bdims, boff)
 
 
 # ---------------------------------------------------------------------------
@@ -536,7 +538,7 @@ def _throttled(progress, t0, every=5.0):
 
 
 def _zones(region, G, mode, tol, X0, seeds):
-    """Zones for a parallel packing (see sgim/_rpack.py, zone_of), or None where one zone is used:
+    """Zones for a parallel packing (see sgim/_rpstate.py, zone_of), or None where one zone is used:
     a radius law or a grading, spheres given beforehand, or a region too narrow to cut.
 
     A sphere of radius r placed in half A, at least w from the cut, reads the grid cells (size c)
@@ -546,8 +548,8 @@ def _zones(region, G, mode, tol, X0, seeds):
     Returns (ZG, zone sphere room, zone pocket room)."""
     if mode != 0 or len(X0):
         return None
-    r = float(G[5][0])  # one grid level, its largest radius: the radius
-    c = float(G[1][0])
+    r = float(G.rmax[0])  # one grid level, its largest radius: the radius
+    c = float(G.cs[0])
     ext = region.hi - region.lo
     axis = 0 if ext[0] >= ext[1] else 1
     w = max(6.0 * r, 2.0 * r + 0.5 * c, 2.0 * c) + 2.0 * r
@@ -574,34 +576,29 @@ def _pack_kernel(args, seeds, seed_r, X0, R0, cap0, zones, report):
     packing band by band (one queue bucket, 0.1 r, high: the order of the one-zone packing up to
     the order within a bucket), A and B in two threads, then the strip.  Returns (X, R, Dist,
     counters)."""
-    lo, hi, tol, G, Dc, exc, mode, rconst, rseq, grade, Dg, goff, discs, fseq = args
     if zones is None:
         ZG, zcap, zccap = np.zeros(4), np.zeros(4, np.int64), np.zeros(4, np.int64)
     else:
         ZG, zcap, zccap = zones
-    st = K.pack_init(lo, hi, tol, G, Dc, exc, mode, rconst, rseq, POOL, grade, Dg, goff, discs, fseq,
-                     seeds, seed_r, X0, R0, cap0, ZG, zcap, zccap)
-    X_, R_, XR, DGL, DGH, nxt, FP, FPk, ohead, head, bcnt, CF, CI, cpl, freel = st[:15]  # fill may grow them
-    bhead, ZS, sbase, send, cbase, cend, CNT, MS, pool, qz0, qinv, n_initial, W0, W1 = st[15:]
+    S, C, head, bcnt, Q, n_initial, W0, W1 = ST.pack_init(args, POOL, seeds, seed_r, X0, R0, cap0, ZG, zcap, zccap)
+    ZS, bhead, CNT = Q.ZS, Q.bhead, Q.CNT
 
     def run(z0, z1, bz, budget, grow, W):
-        return K.fill(z0, z1, bz, budget, grow, args, X_, R_, XR, DGL, DGH, nxt, FP, FPk, ohead, head, bcnt, CF, CI,
-                      cpl, freel, bhead, ZS, ZG, sbase, send, cbase, cend, CNT, MS, pool, qz0, qinv, W)
+        return K.fill(z0, z1, bz, budget, grow, args, S, C, head, bcnt, Q, W)
 
     if CNT[0, 8]:  # the seeds do not fit
         pass
     elif zones is None:
         while True:
-            out = run(0, 0, bhead.shape[1], 50000, True, W0)
-            X_, R_, XR, DGL, DGH, nxt, FP, FPk, ohead, CF, CI, cpl, freel = out[1:]
-            if out[0] == K.ST_DONE:
+            status, S, C = run(0, 0, bhead.shape[1], 50000, True, W0)  # fill may grow S and C
+            if status == ST.ST_DONE:
                 break
             if report:
-                report(int(ZS[:, K.ZSN].sum()), int(ZS[:, K.ZHN].sum()))
+                report(int(ZS[:, ST.ZSN].sum()), int(ZS[:, ST.ZHN].sum()))
     else:
         with ThreadPoolExecutor(1) as pool_b:
             while True:
-                lowest = K.lowest_bucket(ZS, bhead)
+                lowest = ST.lowest_bucket(ZS, bhead)
                 if lowest < 0:
                     break
                 bz = lowest + 1
@@ -609,12 +606,12 @@ def _pack_kernel(args, seeds, seed_r, X0, R0, cap0, zones, report):
                 sa = run(0, 0, bz, 1 << 62, False, W0)[0]
                 sb = fb.result()[0]
                 ss = run(2, 3, bz, 1 << 62, False, W0)[0]
-                if K.ST_FULL in (sa, sb, ss):
+                if ST.ST_FULL in (sa, sb, ss):
                     CNT[0, 8] = 1
                     break
                 if report:
-                    report(int(ZS[:, K.ZSN].sum()), int(ZS[:, K.ZHN].sum()))
-    return K.pack_finish(X_, R_, DGL, ZS, sbase, CNT, MS, n_initial)
+                    report(int(ZS[:, ST.ZSN].sum()), int(ZS[:, ST.ZHN].sum()))
+    return ST.pack_finish(S, Q, n_initial)
 
 
 @dataclass
@@ -681,8 +678,9 @@ def pack_region(region, spec, near=None, progress=None, cap=None, extra_seeds=No
     report = _throttled(progress, t0) if progress else None
     zones = _zones(region, G, mode, tol, X0, seeds) if parallel else None
     while True:
-        X, R, DG, cnt = _pack_kernel((region.lo, region.hi, tol, G, region.Dc, region.exc, mode, rconst, rseq,
-                                      grade, Dg, goff, discs, fseq), seeds, seed_r, X0, R0, cap0, zones, report)
+        args = ST.PackArgs(region.lo, region.hi, tol, G, region.Dc, region.exc, mode, rconst, rseq, grade, Dg, goff,
+                           discs, fseq)
+        X, R, DG, cnt = _pack_kernel(args, seeds, seed_r, X0, R0, cap0, zones, report)
         if cnt[8]:  # a zone ran out of room (never seen): pack in one zone
             zones = None
             continue
@@ -710,14 +708,8 @@ def sphere_grid(X, R, lo, hi):
     """Static multi-level grid over finished spheres: (G, head, nxt, bcnt)."""
     rmin, rmax = (float(R.min()), float(R.max())) if len(R) else (1.0, 1.0)
     G = level_grid(lo, hi, rmin, rmax)
-    head, nxt, bcnt = K.grid_build(np.ascontiguousarray(X), np.ascontiguousarray(R), G[0], G[1], G[2], G[3], G[4],
-                                   G[6], G[7])
+    head, nxt, bcnt = RG.grid_build(np.ascontiguousarray(X), np.ascontiguousarray(R), G)
     return G, head, nxt, bcnt
-
-
-def _gargs(G, head, nxt, bcnt):
-    org, cs, dims, coff, rlo, rmax, bdims, boff = G
-    return org, cs, dims, coff, rmax, bdims, boff, head, nxt, bcnt
 
 
 def contact_pairs(X, R, tol, lo=None, hi=None, grid=None):
@@ -728,13 +720,12 @@ def contact_pairs(X, R, tol, lo=None, hi=None, grid=None):
         return np.zeros((0, 2), np.int64), np.zeros(1, np.int64)
     if lo is None:
         lo, hi = X.min(0) - R.max(), X.max(0) + R.max()
-    G, head, nxt, bcnt = grid or sphere_grid(X, R, lo, hi)
-    a = _gargs(G, head, nxt, bcnt)
-    counts = K.count_pairs(X, R, *a, float(tol))
+    a = grid or sphere_grid(X, R, lo, hi)  # G, head, nxt, bcnt
+    counts = RG.count_pairs(X, R, *a, float(tol))
     offsets = np.zeros(len(X) + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
     out = np.empty((int(offsets[-1]), 2), np.int64)
-    K.fill_pairs(X, R, *a, float(tol), offsets, out)
+    RG.fill_pairs(X, R, *a, float(tol), offsets, out)
     return out, offsets
 
 
@@ -749,15 +740,14 @@ def largest_empty_sphere(X, R, region, grid=None, probes_per_sphere=PROBES, seed
     n = len(X)
     if n == 0:
         return {"radius": None, "relative": None, "centre": None, "probes": 0}
-    G, head, nxt, bcnt = grid or sphere_grid(X, R, region.lo, region.hi)
-    a = _gargs(G, head, nxt, bcnt)
+    a = grid or sphere_grid(X, R, region.lo, region.hi)  # G, head, nxt, bcnt
     k = probes_per_sphere
     near_s = np.zeros(n, np.uint8)
     if region.n_meshes:
         # a probe of a sphere 2 SHELL r or more from every surface is inside the region and nearer to
         # that sphere's surface than to any surface: no surface query for it
         far = (2.0 * SHELL - 1.0) * R
-        near_b = np.isfinite(K.mesh_distance_many(region.Dc, np.ascontiguousarray(X), far))
+        near_b = np.isfinite(RR.mesh_distance_many(region.Dc, np.ascontiguousarray(X), far))
         if region.exc[6] > 0:
             near_b |= _above_many(region.exc, X + np.array([0.0, 0.0, 1.0]) * far[:, None])
         near_s = near_b.astype(np.uint8)
@@ -765,8 +755,8 @@ def largest_empty_sphere(X, R, region, grid=None, probes_per_sphere=PROBES, seed
                     np.int64)
     search = 4.0 * float(R.max())
     pseed = int(np.random.SeedSequence(seed).generate_state(1, np.uint64)[0] >> np.uint64(1))
-    score, pts, near = K.probe_best(X, R, *a, region.lo, region.hi, region.Dc, region.exc, role, near_s, k, pseed,
-                                    SHELL, search, empty_mesh_data(), _NO_EXC)
+    score, pts, near = PR.probe_best(X, R, *a, region.lo, region.hi, region.Dc, region.exc, role, near_s, k, pseed,
+                                     SHELL, search, empty_mesh_data(), _NO_EXC)
     ok = np.nonzero(np.isfinite(score))[0]
     if len(ok) == 0:
         return {"radius": 0.0, "relative": 0.0, "centre": None, "probes": int(n * k)}
@@ -774,8 +764,8 @@ def largest_empty_sphere(X, R, region, grid=None, probes_per_sphere=PROBES, seed
     top = ok[np.argpartition(-score[ok], m - 1)[:m]]
     top = top[np.lexsort((top, -score[top]))]  # best first, ties by sphere
     loc = R[np.maximum(near[top], 0)]
-    cl, pos, nr = K.ascend_many(X, R, *a, region.lo, region.hi, region.Dc, region.exc,
-                                np.ascontiguousarray(pts[top]), search, loc, 200)
+    cl, pos, nr = PR.ascend_many(X, R, *a, region.lo, region.hi, region.Dc, region.exc,
+                                 np.ascontiguousarray(pts[top]), search, loc, 200)
     rl = R[np.maximum(nr, 0)] if local_radius is None else local_radius(pos)
     rel = cl / rl
     b = int(np.argmax(cl))
@@ -798,7 +788,7 @@ def pack_statistics(X, R, region, volume, gap, seed=0, local_radius=None, les=Tr
     out["contact_gap"] = float(gap)
     out["contacts"] = int(len(pairs))
     out["coordination"] = 2.0 * len(pairs) / n
-    ov = K.overlap_stats(np.ascontiguousarray(X), np.ascontiguousarray(R), *_gargs(*grid))
+    ov = RG.overlap_stats(np.ascontiguousarray(X), np.ascontiguousarray(R), *grid)
     out["max_overlap"] = float(max(ov.max(), 0.0))
     out["radius_min"], out["radius_max"], out["radius_mean"] = float(R.min()), float(R.max()), float(R.mean())
     lo, hi = region.lo, region.hi
@@ -851,8 +841,6 @@ def pack_and_measure(region, spec, near=None, gap=1e-3, local_radius=None, progr
 def build_random(scene, tm, region=None, near=None):
     """Pack a scene's kept region.  Returns (centres, radii, packing meta, cavity meta).  `region` / `near`:
     the Region and NearObjects of the scene when already built (sgim/limits.py builds them for its estimate)."""
-    from .cavities import carve
-
     spec = scene.packing.random
     if region is None:
         region = Region.from_scene(scene, fill=spec.fill)
