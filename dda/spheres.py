@@ -74,6 +74,7 @@ from ._sphere_state import (B_FN, NBOND_COLS, ST_NEED_PAIRS, Bonds, Books, Env, 
 from .progress import tracker
 from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
 from .simulation import BlowUpError, ContactLaw
+from .timestep import sphere_critical_dt, sphere_mass
 
 
 @dataclass
@@ -119,7 +120,7 @@ class SphereSet:
         if not density > 0:
             raise ValueError(f"density must be > 0 (got {density!r})")
         self.density = float(density)
-        self.mass = density * 4.0 / 3.0 * np.pi * self.radii ** 3
+        self.mass = sphere_mass(self.radii, density)
         self.fixed = np.zeros(n, bool)
         self.prescribed = np.zeros(n, bool)
         self.velocity = np.zeros((n, 3))
@@ -523,24 +524,14 @@ class SphereSimulation:
         self.htab = np.full(hs, -1, np.int64)
 
     def critical_dt(self):
+        """The stable step of dda/timestep.py, with the walls' stiffness counted into the contact law's."""
         ss = self.spheres
-        free = ~(self.fixed | self.kin)
-        if not free.any():
-            return 1.0
         kn, ks = self.lawrow[0], self.lawrow[1]
         if len(self.wall_lawrow):
             kn = max(kn, self.wall_lawrow[:, 0].max())
             ks = max(ks, self.wall_lawrow[:, 1].max())
-        # four contacts on every sphere: they also bound the rotation of spheres on central bonds (ks = 0, no
-        # rotational stiffness from their bonds)
-        K = np.full(ss.n, 4.0 * max(kn, 3.5 * ks))
-        if ss.n_bonds:
-            kb = np.maximum(ss.bond_kn, 3.5 * ss.bond_ks)
-            K += np.bincount(ss.bond_i, kb, ss.n) + np.bincount(ss.bond_j, kb, ss.n)
-        zeta = max(float(self.lawrow[5]), float(ss.bond_zeta.max()) if ss.n_bonds else 0.0)
-        # two bodies on one spring: omega^2 = 2 K / m; viscous damping shortens the stable step
-        om = np.sqrt(2.0 * K[free] / self.m[free])
-        return float((2.0 / om * (np.sqrt(1.0 + zeta * zeta) - zeta)).min())
+        return sphere_critical_dt(self.m, ~(self.fixed | self.kin), kn, ks, self.lawrow[5], ss.bond_i, ss.bond_j,
+                                  ss.bond_kn, ss.bond_ks, ss.bond_zeta)
 
     def _chunk(self, nsteps):
         if self.blocks is not None:
