@@ -36,7 +36,7 @@ def die_with_parent():
     dies (PR_SET_PDEATHSIG), so an engine never outlives a killed caller (a study case past its time limit,
     a killed rank). Elsewhere a no-op."""
     try:
-        import ctypes
+        import ctypes  # Linux only: loaded where it is used
 
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)
     except (OSError, AttributeError):

@@ -61,10 +61,12 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from sgim.model import SphereModel
 from sgim.portable import matmul
 
 from . import _spheres as _sp
@@ -73,7 +75,8 @@ from ._sphere_state import (B_FN, NBOND_COLS, ST_NEED_PAIRS, Bonds, Books, Env, 
                             PairList, Spheres, Walls)
 from .progress import tracker
 from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
-from .simulation import BlowUpError, ContactLaw
+from .polyhedra import check_convex, face_planes, half_edges
+from .simulation import NPOINT, BlowUpError, ContactLaw, Simulation
 from .timestep import sphere_critical_dt, sphere_mass
 
 
@@ -219,8 +222,6 @@ def load_model(model, density=2600.0, bonds: BondLaw | None = None) -> SphereSet
     """SphereSet from an sgim model (a SphereModel or the path of a model.npz): its spheres, and bonds (with
     `bonds`, default BondLaw()) on the pairs of its bond list whose ``bonded`` flag is set."""
     if not hasattr(model, "centers"):
-        from sgim.model import SphereModel
-
         model = SphereModel.load(model)
     ss = SphereSet(model.centers, model.radii, density)
     pairs = np.asarray(model.bonds, np.int64).reshape(-1, 2)[np.asarray(model.bonded, bool)]
@@ -264,8 +265,6 @@ class SphereResults:
 
 def _wall_arrays(walls):
     """World geometry of fixed convex polyhedra: vertices, face planes, face loops, per-wall ranges, boxes."""
-    from .polyhedra import check_convex, face_planes, half_edges
-
     verts, fn, fd, fvs, fv, fstart, boxes = [], [], [], [0], [], [0], []
     nv = 0
     for s in walls or []:
@@ -418,8 +417,6 @@ class SphereSimulation:
 
     def _init_coupled(self, system, wall_law, block_law, pair_laws, dt, safety):
         """Spheres with moving blocks: a block Simulation stepped inside the coupled loop (dda/_coupled.py)."""
-        from .simulation import NPOINT, Simulation
-
         ss = self.spheres
         self.lawrow = np.array(self.law.row(), float)
         wl = wall_law or self.law
@@ -639,7 +636,7 @@ class SphereSimulation:
 def held_by_bonds(n, bond_i, bond_j, anchored):
     """(n,) bool: the spheres not `anchored` (fixed or prescribed) that a path of bonds ties to an anchored one:
     the part of a model that has a static equilibrium under its bonds."""
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import coo_matrix  # scipy only for the static solves (start-up time)
     from scipy.sparse.csgraph import connected_components
 
     anchored = np.asarray(anchored, bool)
@@ -657,9 +654,7 @@ def bond_network_static(centers, mass, anchored, bond_i, bond_j, bond_kn, bond_k
     over the spheres held by bonds (held_by_bonds; the others stay 0). Each bond is a normal spring kn along its
     centre line plus a shear spring ks across it (central bonds: ks = 0; rotations left out). ValueError when
     the network is a mechanism (no finite solution)."""
-    import warnings
-
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import coo_matrix  # scipy only for the static solves (start-up time)
     from scipy.sparse.linalg import spsolve
 
     c = np.asarray(centers, float).reshape(-1, 3)

@@ -13,6 +13,7 @@ The functions import the package's modules when first called: ``import sgim`` st
 of the project shares (SceneError, CliError, the command-line conventions, atomic writers) is sgim/common.py; the
 validating reader of every scene-like TOML file is sgim/reader.py.
 """
+# The functions below import the build, the scene reader and the model when first called: `import sgim` stays light
 from .kernel_cache import configure as _configure_kernel_cache
 
 _configure_kernel_cache()  # before any kernel module is imported (sgim/kernel_cache.py)

@@ -10,6 +10,8 @@ import numpy as np
 
 from .portable import each, each2
 
+# scipy (special functions, optimisers) is imported inside the laws that need it: start-up time of every command
+
 # ---------------------------------------------------------------------------
 # radius laws
 

@@ -80,6 +80,6 @@ def configure():
     os.environ["ROCKDEM_NUMBA_CACHE_BASE"] = str(folder.parent)
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     if "numba" in sys.modules:  # numba read its configuration at import: set it there too
-        from numba.core import config
+        from numba.core import config  # only when numba is already loaded (this module must not load it)
 
         config.CACHE_DIR = str(folder)

@@ -119,7 +119,7 @@ class TriMesh:
         diag = norm(np.ptp(V, axis=0)) if len(V) else 0.0
         tol = weld * diag
         if tol > 0 and len(V) > 1:
-            from scipy.spatial import cKDTree
+            from scipy.spatial import cKDTree  # scipy only for meshes that need welding (start-up time)
 
             pairs = cKDTree(V).query_pairs(tol, output_type="ndarray")
             lab = _components(len(V), pairs)
