@@ -276,7 +276,7 @@ def _crease_covered(vert, fnw, fdw, p, x0, x1, n, f0, f1, tol, lat, sgn, overlap
     return min(hi, overlap) > 0.0 and lo <= tol
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _edge_crossing(vert, he_origin, he_next, scr, na, va0, vb0, ha, hb, P):
     """Where edge ha of A crosses edge hb of B seen along n (2D segment intersection in the plane, coordinates
     in scr) into P; False when they do not cross."""
@@ -310,7 +310,7 @@ def _edge_crossing(vert, he_origin, he_next, scr, na, va0, vb0, ha, hb, P):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _crossing_covered(vert, fnw, fdw, he_origin, he_next, ha, hb, n, fa0, fa1, fb0, fb1, tol, lat, overlap):
     """A crossing of edges ha (A) and hb (B) next to a vertex that bears by the crease rule is that vertex's
     contact."""
@@ -324,7 +324,7 @@ def _crossing_covered(vert, fnw, fdw, he_origin, he_next, ha, hb, n, fa0, fa1, f
             or _crease_covered(vert, fnw, fdw, vert[gr], vert[ga], vert[gq], n, fa0, fa1, tol, lat, 1.0, overlap))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _keep_point(P, n, e1, e2, depth, mid, cid, merge, lat, k, cu, cv, out_pos, out_depth, out_id):
     """Store the candidate P (depth, id cid) unless a stored point lies within `merge` in the plane and is as
     deep (a deeper one replaces it; when full, it replaces the shallowest point if deeper); returns the count."""

@@ -232,7 +232,7 @@ def reset_forces(active, dof12, forces, loads):
                     qs[i, a] = qext[i, a]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _prescribed_step(i, dt, blocks, forces, acc, qh):
     """Prescribed motion of block i: the driver does the work the contacts do against it."""
     vel, wpres, quat, pos = blocks.vel, blocks.wpres, blocks.quat, blocks.pos
@@ -246,7 +246,7 @@ def _prescribed_step(i, dt, blocks, forces, acc, qh):
         pos[i, a] += dt * vel[i, a]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _point_loads(i, R, loads, forces, pos, tally):
     """Constant point loads of rigid block i (world force at a body point) and their potential."""
     pl_r, pl_f, force, torque = loads.pl_r, loads.pl_f, forces.force, forces.torque
@@ -266,7 +266,7 @@ def _point_loads(i, R, loads, forces, pos, tally):
         tally[T_POT] -= f0 * (pos[i, 0] + r0) + f1 * (pos[i, 1] + r1) + f2 * (pos[i, 2] + r2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rigid_step(i, dt, dtavg, local_damp, blocks, loads, forces, sleep, work, tally):
     """Central difference of rigid block i (module docstring); kinetic and potential energy and the local
     damping work into tally; the calm-step counter when sleeping is on. Returns True when non-finite."""

@@ -28,7 +28,7 @@ from ._state import (C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAK
                      LAW_TANPHI, LAW_TEN, LAW_ZETA, T_DAMPING, T_ELASTIC, T_FRICTION, T_MAXDEPTH)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _hash_key(key, mask):
     h = key * np.int64(0x9E3779B97F4A7C15 & 0x7FFFFFFFFFFFFFFF)
     h ^= h >> 29
@@ -53,7 +53,7 @@ def hash_pairs(con, old):
     return hmask
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _slot_of(con, old, key, hmask):
     """Last step's slot of the pair `key`, or -1."""
     htab = con.htab
@@ -65,7 +65,7 @@ def _slot_of(con, old, key, hmask):
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _released(con, old, slot, matched, ks):
     """Shear-spring energy of last step's points of this pair that have no successor (they opened)."""
     if slot < 0:
@@ -78,7 +78,7 @@ def _released(con, old, slot, matched, ks):
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def common_plane(i, j, slot, con, old, pos, geom, kg, size, work):
     """Common plane of pair (i, j) into work.nrm (A = i -> B = j); returns (gap, A's and B's support vertex,
     max_A x.n, min_B x.n, FCP iterations, 1 when the separating-axis search gave the plane else 0)."""
@@ -123,7 +123,7 @@ def common_plane(i, j, slot, con, old, pos, geom, kg, size, work):
     return g, ia, ib, sa, sb, its, nsat
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pair_points(i, j, geom, sa, sb, ia, ib, kg, size, work):
     """Contact points of pair (i, j) on the plane work.nrm into work.p_pos / p_depth / p_id; returns their count."""
     p_pos, p_depth, p_id = work.p_pos, work.p_depth, work.p_id
@@ -146,7 +146,7 @@ def pair_points(i, j, geom, sa, sb, ia, ib, kg, size, work):
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _effective_mass(i, j, blocks, static):
     """Mass of the contact's normal mode: the free block's when the other is fixed, asleep or prescribed."""
     kin, mass = blocks.kin, blocks.mass
@@ -160,7 +160,7 @@ def _effective_mass(i, j, blocks, static):
     return mass[i] * mass[j] / (mass[i] + mass[j])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _shear_history(con, old, slot, pid, nrm, matched, us):
     """Shear displacement of the same feature in last step's contact, turned onto the current tangent plane
     keeping its length, into us; returns (found, bonded)."""
@@ -191,7 +191,7 @@ def _shear_history(con, old, slot, pid, nrm, matched, us):
     return True, bonded
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _relative_velocity(i, j, P, blocks, deform, static, R, w, vrel):
     """Velocity of B (= j) relative to A (= i) at the point P (half-step velocities) into vrel."""
     pos, vel, dof12 = blocks.pos, blocks.vel, blocks.dof12
@@ -225,7 +225,7 @@ def _relative_velocity(i, j, P, blocks, deform, static, R, w, vrel):
         vrel[2] -= w[0] * ry - w[1] * rx
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _apply_point_force(i, j, P, fpt, blocks, deform, forces, static, R, X):
     """The point force fpt (on B = j, minus on A = i) at P: forces, torques about the centroids, strain forces."""
     pos, force, torque = blocks.pos, forces.force, forces.torque
@@ -256,7 +256,7 @@ def _apply_point_force(i, j, P, fpt, blocks, deform, forces, static, R, X):
         add_strain_force(j, X, R, fpt, 1.0, forces.qs)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _store_point(con, new, s, kept, pid, us, st, bonded, P, fn_el, depth):
     """Record point `kept` of pair slot s in this step's buffer."""
     con.pid[new, s, kept] = pid
@@ -272,7 +272,7 @@ def _store_point(con, new, s, kept, pid, us, st, bonded, P, fn_el, depth):
     con.depth[new, s, kept] = depth
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pair_forces(i, j, s, slot, k, apt, meff, first_step, dt, law, blocks, deform, forces, con, work, tally, count):
     """Contact law at the k points of pair (i, j) (slot s of this step, `slot` of last step's, area apt per
     point); returns the number of points kept (bearing or bonded)."""
@@ -314,7 +314,7 @@ def pair_forces(i, j, s, slot, k, apt, meff, first_step, dt, law, blocks, deform
     return kept
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _new_pair(con, new, s, key, i, j, nrm):
     """Open slot s of this step's buffer for pair (i, j) with the plane nrm and no points yet."""
     con.key[new, s] = key
