@@ -29,15 +29,14 @@ from numba import njit
 
 from ._bondlaw import bond_forces, bond_lookup, sync_central
 from ._broad import _hash
-from ._contact import point_force
 from ._deform import add_strain_force, body_point, deform_geometry, point_velocity
 from ._integrate import run_chunk, update_geometry
 from ._kinematics import omega as _omega
 from ._kinematics import quat_matrix
-from ._sphere_state import (LAW_KN, LAW_KS, LAW_TANPHI, LAW_ZETA, R_BOND, ST_BONDS, ST_BROKEN, ST_CONTACTS,
-                            ST_JOINTS, ST_NEED, ST_WALL)
+from ._sphere_state import R_BOND, ST_BONDS, ST_BROKEN, ST_CONTACTS, ST_JOINTS, ST_NEED, ST_WALL
 from ._spheres import (_cell_hash, _joints, book_energy, carry_shear, clear_forces, closest_on_polyhedron,
-                       contact_normal, hashed_cells, history_hash, integrate, record_contact, sphere_pair)
+                       contact_normal, hashed_cells, history_hash, integrate, record_contact, sphere_pair,
+                       sphere_point, sphere_point_force)
 from ._state import ST_FCP_ITER
 
 OK, NEED_CAPACITY, BLOWUP, NEED_BLOCK_CAPACITY = 0, 1, 2, 3
@@ -47,20 +46,13 @@ OK, NEED_CAPACITY, BLOWUP, NEED_BLOCK_CAPACITY = 0, 1, 2, 3
 def _block_contact(b, j, key, depth, n, p, mo, sp, blocks, deform, loads, lawrow, dt, hist, hc, nnew, res):
     """Sphere j against block b (normal n from the block to the sphere, contact point p); the block takes the
     reaction in ``loads.fext``, ``text``, ``qext``. Returns the contact count."""
-    x = mo.x
-    v = mo.v
-    w = mo.w
     bpos = blocks.pos
     bstatic = blocks.fixed  # no sleeping in coupled runs
     us = np.empty(3)
     carry_shear(hist, hc, key, n, us)
-    rj0 = p[0] - x[j, 0]
-    rj1 = p[1] - x[j, 1]
-    rj2 = p[2] - x[j, 2]
+    rj = np.empty(3)
     vrel = np.empty(3)
-    vrel[0] = v[j, 0] + w[j, 1] * rj2 - w[j, 2] * rj1
-    vrel[1] = v[j, 1] + w[j, 2] * rj0 - w[j, 0] * rj2
-    vrel[2] = v[j, 2] + w[j, 0] * rj1 - w[j, 1] * rj0
+    sphere_point(j, p, mo, rj, vrel)
     R = np.empty((3, 3))
     wb_ = np.empty(3)
     X = np.empty(3)
@@ -89,18 +81,9 @@ def _block_contact(b, j, key, depth, n, p, mo, sp, blocks, deform, loads, lawrow
     else:
         meff = sp.m[j] * blocks.mass[b] / (sp.m[j] + blocks.mass[b])
     f = np.empty(3)
-    st, bnd, fn_el, ee, df, dd = point_force(lawrow[LAW_KN], lawrow[LAW_KS], lawrow[LAW_TANPHI], 0.0, 0.0,
-                                             lawrow[LAW_ZETA], meff, depth, n, vrel, dt, us, False, f)
-    res[0] += ee
-    res[1] += df
-    res[2] += dd
+    st, fn_el = sphere_point_force(j, rj, meff, depth, n, vrel, us, lawrow, dt, mo, res, f)
     if st == 0:
         return nnew
-    for a in range(3):
-        mo.force[j, a] += f[a]
-    mo.torque[j, 0] += rj1 * f[2] - rj2 * f[1]
-    mo.torque[j, 1] += rj2 * f[0] - rj0 * f[2]
-    mo.torque[j, 2] += rj0 * f[1] - rj1 * f[0]
     if not bstatic[b]:
         for a in range(3):
             loads.fext[b, a] -= f[a]

@@ -137,6 +137,39 @@ def contact_normal(c, cpt, sd, r, f0, f1, fnw, fdw, nrm):
             nrm[a] = fnw[fb, a]
 
 
+@njit(cache=True, inline="always")
+def sphere_point(j, p, mo, r, vrel):
+    """The lever r = p - x_j of sphere j's point p and the point's velocity v_j + w_j x r (into vrel)."""
+    x = mo.x
+    v = mo.v
+    w = mo.w
+    r[0] = p[0] - x[j, 0]
+    r[1] = p[1] - x[j, 1]
+    r[2] = p[2] - x[j, 2]
+    vrel[0] = v[j, 0] + w[j, 1] * r[2] - w[j, 2] * r[1]
+    vrel[1] = v[j, 1] + w[j, 2] * r[0] - w[j, 0] * r[2]
+    vrel[2] = v[j, 2] + w[j, 0] * r[1] - w[j, 1] * r[0]
+
+
+@njit(cache=True, inline="always")
+def sphere_point_force(j, r, meff, depth, n, vrel, us, lawrow, dt, mo, res, f):
+    """The contact law (dda/_contact.py point_force, no cohesion) at a point of sphere j with lever r: its
+    energy terms added to res, the force f (on j, along n) and its torque added to sphere j when the point is in
+    contact. Returns (status, elastic normal force)."""
+    st, bnd, fn_el, ee, df, dd = point_force(lawrow[LAW_KN], lawrow[LAW_KS], lawrow[LAW_TANPHI], 0.0, 0.0,
+                                             lawrow[LAW_ZETA], meff, depth, n, vrel, dt, us, False, f)
+    res[0] += ee
+    res[1] += df
+    res[2] += dd
+    if st != 0:
+        for a in range(3):
+            mo.force[j, a] += f[a]
+        mo.torque[j, 0] += r[1] * f[2] - r[2] * f[1]
+        mo.torque[j, 1] += r[2] * f[0] - r[0] * f[2]
+        mo.torque[j, 2] += r[0] * f[1] - r[1] * f[0]
+    return st, fn_el
+
+
 @njit(cache=True)
 def _contact(i, j, is_wall, key, depth, n, p, mo, sp, lawrow, dt, hist, hc, nnew, res):
     """Contact of sphere j against body i (a sphere, or wall i when is_wall): force on j along n (i -> j) at the
@@ -144,17 +177,11 @@ def _contact(i, j, is_wall, key, depth, n, p, mo, sp, lawrow, dt, hist, hc, nnew
     x = mo.x
     v = mo.v
     w = mo.w
-    force = mo.force
-    torque = mo.torque
     us = np.empty(3)
     carry_shear(hist, hc, key, n, us)
+    rj = np.empty(3)
     vrel = np.empty(3)
-    rj0 = p[0] - x[j, 0]
-    rj1 = p[1] - x[j, 1]
-    rj2 = p[2] - x[j, 2]
-    vrel[0] = v[j, 0] + w[j, 1] * rj2 - w[j, 2] * rj1
-    vrel[1] = v[j, 1] + w[j, 2] * rj0 - w[j, 0] * rj2
-    vrel[2] = v[j, 2] + w[j, 0] * rj1 - w[j, 1] * rj0
+    sphere_point(j, p, mo, rj, vrel)
     if is_wall:
         meff = sp.m[j]
     else:
@@ -166,24 +193,15 @@ def _contact(i, j, is_wall, key, depth, n, p, mo, sp, lawrow, dt, hist, hc, nnew
         vrel[2] -= v[i, 2] + w[i, 0] * ri1 - w[i, 1] * ri0
         meff = pair_meff(i, j, sp.m, sp.fixed, sp.kin)
     f = np.empty(3)
-    st, bnd, fn_el, ee, df, dd = point_force(lawrow[LAW_KN], lawrow[LAW_KS], lawrow[LAW_TANPHI], 0.0, 0.0,
-                                             lawrow[LAW_ZETA], meff, depth, n, vrel, dt, us, False, f)
-    res[0] += ee
-    res[1] += df
-    res[2] += dd
+    st, fn_el = sphere_point_force(j, rj, meff, depth, n, vrel, us, lawrow, dt, mo, res, f)
     if st == 0:
         return nnew
-    for a in range(3):
-        force[j, a] += f[a]
-    torque[j, 0] += rj1 * f[2] - rj2 * f[1]
-    torque[j, 1] += rj2 * f[0] - rj0 * f[2]
-    torque[j, 2] += rj0 * f[1] - rj1 * f[0]
     if not is_wall:
         for a in range(3):
-            force[i, a] -= f[a]
-        torque[i, 0] -= ri1 * f[2] - ri2 * f[1]
-        torque[i, 1] -= ri2 * f[0] - ri0 * f[2]
-        torque[i, 2] -= ri0 * f[1] - ri1 * f[0]
+            mo.force[i, a] -= f[a]
+        mo.torque[i, 0] -= ri1 * f[2] - ri2 * f[1]
+        mo.torque[i, 1] -= ri2 * f[0] - ri0 * f[2]
+        mo.torque[i, 2] -= ri0 * f[1] - ri1 * f[0]
     return record_contact(hist, hc, nnew, key, fn_el, i if not is_wall else -1 - i, j, us)
 
 
