@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from . import shapes
+from .blocktable import read_blocks
 from .common import SceneError  # noqa: F401  (also the scene API's name: sgim.scene.SceneError)
 from .geometry import MeshError, dip_to_normal, facet_degeneracies, load_mesh_file, triangulate_plan
 from .packing import lattice_counts
@@ -115,6 +116,7 @@ class Scene:
     cavities: list = field(default_factory=list)  # sgim.cavities.Cavity, from [[cavity]]
     surfaces: list = field(default_factory=list)  # SurfaceDiscontinuity; indices follow every disc
     limits: dict = field(default_factory=dict)  # [limits]: max_spheres (sgim/limits.py)
+    blocks: object = None  # sgim.blocktable.BlocksSpec from [blocks] (the block model, dda/geoblocks.py)
 
     @property
     def n_lattice_sites(self) -> int:
@@ -125,6 +127,7 @@ TOP_KEYS = {"name", "description", "domain", "packing", "excavation", "discontin
 TOP_KEYS |= {"dfn", "joint_set"}  # Monte-Carlo fracture network (sgim/dfn.py)
 TOP_KEYS |= {"cavity"}  # inner excavations (sgim/cavities.py)
 TOP_KEYS |= {"limits"}  # resource limits checked before the build (sgim/limits.py)
+TOP_KEYS |= {"blocks"}  # the block model's own keys (sgim/blocktable.py), read and validated, unused by sgim build
 LIMIT_KEYS = {"max_spheres"}
 
 
@@ -242,6 +245,7 @@ def scene_from_dict(data: dict, path="<scene>", text="", reader=None) -> Scene:
     if not isinstance(cav_list, list):
         rd.err("cavity", cav_list, "must be an array of tables ([[cavity]])")
     scene.cavities = [_read_cavity(rd, ct, f"cavity[{k}]", domain, path) for k, ct in enumerate(cav_list)]
+    scene.blocks = read_blocks(rd, data, scene)
     if packing.random is not None:  # grading names refer to everything above
         from .rpack import check_scene
 

@@ -1,0 +1,241 @@
+"""Convex blocks whose faces remember what made them, split by planes; the exact "does this cutter reach this
+block" tests of the block model (dda/geoblocks.py).
+
+A :class:`TBlock` is a convex polyhedron: vertices (n, 3), faces (vertex index lists, counter-clockwise seen from
+outside) and, per face, the id of its *source* (an entry of the builder's source table: the domain box, a joint
+set plane, a disc, a facet of a surface). :func:`split` cuts a block by a plane directly, face by face
+(Sutherland-Hodgman on each face polygon, one new vertex per crossed edge, the cap polygon on the plane ordered
+around the plane's normal): the faces keep their sources and the two caps get the cutting plane's source, so no
+convex hull has to be rebuilt and no face has to be recognised again.
+
+Tolerance: a vertex within ``rel`` (1e-9) times the block's diagonal of the plane is taken as lying on it: it
+goes to both pieces and no intersection point is made next to it; a plane that only touches a block leaves it
+whole.
+
+Reach tests (exact, in the cutter's plane): the section of a block by a plane is a convex polygon; a disc
+reaches the block when the polygon's distance to the disc's centre is at most its radius; a triangle reaches
+it when the polygon and the triangle overlap with positive area (separating axes).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._geocut import edges_csr, overlap_mask, signed_snapped, split_csr, volume_centroid_csr
+
+REL = 1e-9  # snapping tolerance, relative to a block's diagonal
+
+
+class TBlock:
+    """A convex block: vertices (n, 3), faces as CSR (``fptr``, ``fidx``: face k is fidx[fptr[k]:fptr[k+1]],
+    counter-clockwise seen from outside), a source id per face (``src``) and a material ("rock", or a fault's
+    name)."""
+
+    __slots__ = ("v", "fptr", "fidx", "src", "material", "_edges")
+
+    def __init__(self, v, faces, src, material="rock"):
+        self.v = np.ascontiguousarray(v, dtype=np.float64).reshape(-1, 3)
+        self.fptr = np.concatenate([[0], np.cumsum([len(f) for f in faces])]).astype(np.int64)
+        self.fidx = np.array([i for f in faces for i in f], np.int64)
+        self.src = np.asarray(src, np.int64).copy()
+        self.material = material
+        self._edges = None
+
+    @classmethod
+    def from_csr(cls, v, fptr, fidx, src, material="rock"):
+        b = cls.__new__(cls)
+        b.v, b.fptr, b.fidx, b.src, b.material, b._edges = v, fptr, fidx, src, material, None
+        return b
+
+    @property
+    def faces(self):
+        f = self.fidx.tolist()
+        p = self.fptr.tolist()
+        return [f[a:b] for a, b in zip(p[:-1], p[1:])]
+
+    def diag(self):
+        return float(np.linalg.norm(self.v.max(0) - self.v.min(0)))
+
+    def edges(self):
+        """(m, 2) unique undirected edges."""
+        if self._edges is None:
+            self._edges = edges_csr(len(self.v), self.fptr, self.fidx)
+        return self._edges
+
+    def volume_centroid(self):
+        vol, c = volume_centroid_csr(self.v, self.fptr, self.fidx)
+        return vol, c
+
+    def volume(self):
+        return volume_centroid_csr(self.v, self.fptr, self.fidx)[0]
+
+
+def volume_centroid(v, faces):
+    """Exact volume and centroid of a closed polyhedron with outward faces (fan tetrahedra)."""
+    b = TBlock(v, faces, np.zeros(len(faces), np.int64))
+    return b.volume_centroid()
+
+
+def face_planes(b: TBlock):
+    """Outward unit normals (k, 3) and offsets (k,) of every face (Newell's method)."""
+    faces = b.faces
+    n = np.zeros((len(faces), 3))
+    d = np.zeros(len(faces))
+    for k, f in enumerate(faces):
+        p = b.v[f]
+        m = np.cross(p, np.roll(p, -1, axis=0)).sum(0)
+        m /= np.linalg.norm(m)
+        n[k] = m
+        d[k] = float(p.mean(0) @ m)
+    return n, d
+
+
+def signed(b: TBlock, n, d):
+    """Signed distances of the vertices to the plane n . x = d (unit n), those within the tolerance set to 0."""
+    return signed_snapped(b.v, float(n[0]), float(n[1]), float(n[2]), float(d), REL)
+
+
+def _cap_order(pts, n):
+    """Indices ordering points of a convex polygon counter-clockwise seen from the side n points to."""
+    c = pts.mean(0)
+    e1 = pts[np.argmax(np.linalg.norm(pts - c, axis=1))] - c
+    e1 -= n * (e1 @ n)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    d = pts - c
+    return np.argsort(np.arctan2(d @ e2, d @ e1), kind="stable")
+
+
+def split(b: TBlock, n, d, source, s=None):
+    """Cut ``b`` by the plane n . x = d (unit n) into (below, above): below is n . x <= d. A side without volume
+    is None (the block is returned whole on the other side). Both caps get face source ``source``."""
+    if s is None:
+        s = signed(b, n, d)
+    if not (s < 0).any():
+        return None, b
+    if not (s > 0).any():
+        return b, None
+    r = split_csr(b.v, b.fptr, b.fidx, b.src, s, int(source), float(n[0]), float(n[1]), float(n[2]))
+    return TBlock.from_csr(*r[:4], b.material), TBlock.from_csr(*r[4:], b.material)
+
+
+def clip_below(b: TBlock, n, d, source):
+    """The part of ``b`` with n . x <= d (None when nothing is left)."""
+    return split(b, n, d, source)[0]
+
+
+# ---------------------------------------------------------------------------------------------------------
+# sections and reach tests
+
+
+def plane_basis(n):
+    """Two unit vectors e1, e2 with (e1, e2, n) right-handed."""
+    n = np.asarray(n, float)
+    h = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(h, n)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n, e1)
+
+
+def section(b: TBlock, n, d, s=None):
+    """Points of the section polygon of ``b`` by the plane n . x = d (empty when the plane does not cross the
+    block's interior)."""
+    if s is None:
+        s = signed(b, n, d)
+    if not ((s < 0).any() and (s > 0).any()):
+        return np.zeros((0, 3))
+    e = b.edges()
+    sa, sb = s[e[:, 0]], s[e[:, 1]]
+    cr = sa * sb < 0
+    a, c = b.v[e[cr, 0]], b.v[e[cr, 1]]
+    t = (sa[cr] / (sa[cr] - sb[cr]))[:, None]
+    return np.vstack([a + t * (c - a), b.v[s == 0.0]])
+
+
+def convex_polygon_2d(p):
+    """Counter-clockwise convex hull (monotone chain) of 2D points; collinear points dropped."""
+    pts = sorted(set(map(tuple, np.asarray(p, float).tolist())))
+    if len(pts) < 3:
+        return np.asarray(pts, float).reshape(-1, 2)
+
+    def half(seq):
+        out = []
+        for q in seq:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (q[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(q)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.asarray(lower[:-1] + upper[:-1], float)
+
+
+def point_polygon_distance(poly, q):
+    """Distance from the 2D point q to the convex CCW polygon poly (0 inside)."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    e = b - a
+    w = q - a
+    cross = e[:, 0] * w[:, 1] - e[:, 1] * w[:, 0]
+    if (cross >= 0).all():
+        return 0.0
+    t = np.clip(np.einsum("ij,ij->i", w, e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300), 0.0, 1.0)
+    return float(np.sqrt(((a + t[:, None] * e - q) ** 2).sum(1)).min())
+
+
+def disc_reaches(b: TBlock, centre, n, radius):
+    """True when the disc (centre, unit normal n, radius) meets the interior of block ``b``'s section by its
+    plane (the exact test: distance from the centre to the section polygon <= radius)."""
+    d = float(np.dot(n, centre))
+    pts = section(b, n, d)
+    if len(pts) < 3:
+        return False
+    e1, e2 = plane_basis(n)
+    rel = pts - centre
+    poly = convex_polygon_2d(np.column_stack([rel @ e1, rel @ e2]))
+    if len(poly) < 3:
+        return False
+    return point_polygon_distance(poly, np.zeros(2)) <= radius
+
+
+def polygons_overlap(p, q, eps):
+    """True when two convex CCW 2D polygons overlap by more than ``eps`` along every separating axis."""
+    q = np.ascontiguousarray(q, dtype=np.float64)[None]
+    return bool(overlap_mask(np.ascontiguousarray(p, dtype=np.float64), q, np.zeros(1, np.int64), eps)[0])
+
+
+def triangle_reaches(b: TBlock, tri):
+    """True when the triangle ``tri`` (3, 3) meets block ``b`` with positive area in the triangle's plane."""
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    n /= np.linalg.norm(n)
+    pts = section(b, n, float(n @ tri[0]))
+    if len(pts) < 3:
+        return False
+    e1, e2 = plane_basis(n)
+    p = convex_polygon_2d(np.column_stack([pts @ e1, pts @ e2]))
+    t = convex_polygon_2d(np.column_stack([tri @ e1, tri @ e2]))
+    if len(p) < 3 or len(t) < 3:
+        return False
+    return polygons_overlap(p, t, REL * b.diag())
+
+
+def inside_all(b: TBlock, pts, tol=0.0):
+    """Boolean per point: inside every face plane of ``b`` (within tol)."""
+    n, d = face_planes(b)
+    return (np.asarray(pts) @ n.T - d <= tol).all(1)
+
+
+def euler_characteristic(b: TBlock):
+    return len(b.v) - len(b.edges()) + len(b.faces)
+
+
+def angle_sorted(pts, n):
+    """``pts`` ordered counter-clockwise about ``n`` (a convex polygon's vertices)."""
+    return pts[_cap_order(pts, n)]
+
+
+def unit(v):
+    v = np.asarray(v, float)
+    return v / math.sqrt(float(v @ v))

@@ -1,0 +1,327 @@
+"""The block model of an sgim scene: the scene's rock mass cut into convex blocks whose faces remember what made
+them (issue: one scene, two models).
+
+    from sgim.scene import load_scene
+    from dda.geoblocks import build_blocks
+    model = build_blocks(load_scene("cases/scenes/open_pit_coarse.toml"))
+    model.blocks, model.sources, model.specs(), model.summary()
+
+Stages, in order (each stage cuts the blocks the previous one left):
+
+1. the ``[domain]`` box;
+2. the persistent joint sets of ``[[blocks.joint_set]]`` (dip, dip direction, spacing, origin; a plane of a set
+   with ``persistence`` p < 1 cuts each block it crosses with chance p; with ``extent``, only blocks whose section
+   by the plane lies in the box);
+3. every ``[[excavation]]`` surface removes everything above it, exactly (dda/geoexcavate.py);
+4. every ``[[cavity]]`` removes everything inside it, exactly (dda/geoexcavate.py);
+5. every ``[[discontinuity]]`` disc and every fracture of the ``[dfn]`` network cuts, along its plane, each whole
+   block its disc reaches (exact disc-against-section test, dda/blockcut.py); a disc with thickness t > 0 (a
+   fault) cuts along its two faces at +-t/2, and the pieces between them whose centroid lies within the disc's
+   radius get the fault as their material; a triangulated ``[[discontinuity]]`` cuts with each facet's plane the
+   blocks that facet reaches.
+
+Slivers: a planar cut (stages 2 and 5) that would leave a piece smaller than ``[blocks] min_volume`` is not made
+(the block stays whole: volume is conserved, nothing dropped); the pieces of the exact excavations are kept
+whatever their size (``summary()["small_blocks"]`` counts those below min_volume).
+
+Faces and contact kinds: every face has a source (``sources[block.src[k]]``) with a kind: ``domain`` (the box),
+``joint`` (a joint set plane), ``excavation`` (a free face on a surface or cavity wall), ``intact`` (a vertical
+split under a valley of the terrain, a split between two kept pieces of a cavity cut), ``fault``. A face made
+by a disc (or a facet of a triangulated discontinuity) is joint (fault) where a point of it lies inside the
+disc (triangle) and intact rock outside: :meth:`BlockModel.point_kinds` decides per contact point.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sgim.blocktable import DEFAULTS as BLOCK_DEFAULTS
+from sgim.blocktable import BlocksSpec
+from sgim.dfn import network_for
+from sgim.geometry import dip_to_normal
+
+from .blockcut import REL, TBlock, disc_reaches, section, signed, split, triangle_reaches
+from .blockspec import BlockSpec
+from .geoexcavate import CavityCut, Terrain, carve_block, excavate_block
+
+KINDS = ("domain", "joint", "intact", "fault", "excavation")
+DOMAIN, JOINT, INTACT, FAULT, EXCAVATION = range(len(KINDS))
+BOX_FACES = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+
+
+@dataclass
+class Source:
+    """What made a face. ``shape``: "box", "plane" (a joint set), "disc" (centre, normal, radius), "triangle"
+    (tri), "surface" (an excavation or cavity). ``kind`` is the face kind (KINDS) inside a disc or triangle."""
+
+    name: str
+    kind: int
+    shape: str = "plane"
+    centre: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    radius: float = 0.0
+    tri: np.ndarray | None = None
+
+
+@dataclass
+class BlockModel:
+    blocks: list
+    sources: list
+    lo: np.ndarray
+    hi: np.ndarray
+    min_volume: float
+    stats: dict = field(default_factory=dict)
+
+    def specs(self, prefix="b"):
+        """The blocks as dda BlockSpecs (material "rock" or the fault's name)."""
+        return [BlockSpec(b.v.copy(), [list(f) for f in b.faces], name=f"{prefix}{i}", material=b.material)
+                for i, b in enumerate(self.blocks)]
+
+    def face_kinds(self, i):
+        """The nominal kind of every face of block i (a disc's faces: the disc's kind)."""
+        return np.array([self.sources[s].kind for s in self.blocks[i].src], np.int64)
+
+    def point_kinds(self, i, face, points):
+        """The kind (KINDS index) of each contact point on face ``face`` of block ``i``: a disc's (triangle's) face
+        is its kind inside the disc (triangle), intact rock outside; other faces have their source's kind."""
+        src = self.sources[self.blocks[i].src[face]]
+        pts = np.atleast_2d(np.asarray(points, float))
+        out = np.full(len(pts), src.kind, np.int64)
+        if src.shape == "disc":
+            rel = pts - src.centre
+            radial = rel - np.outer(rel @ src.normal, src.normal)
+            out[np.einsum("ij,ij->i", radial, radial) > src.radius ** 2] = INTACT
+        elif src.shape == "triangle":
+            out[~_in_triangle(src.tri, pts)] = INTACT
+        return out
+
+    def volumes(self):
+        return np.array([b.volume() for b in self.blocks])
+
+    def summary(self):
+        vol = self.volumes()
+        mat = {}
+        for b in self.blocks:
+            mat[b.material] = mat.get(b.material, 0) + 1
+        return {"blocks": len(self.blocks), "volume": float(vol.sum()),
+                "smallest": float(vol.min()) if len(vol) else None, "median": float(np.median(vol)) if len(vol) else None,
+                "largest": float(vol.max()) if len(vol) else None, "materials": mat,
+                "small_blocks": int((vol < self.min_volume).sum()), "min_volume": self.min_volume, **self.stats}
+
+
+def _in_triangle(tri, pts):
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    ok = np.ones(len(pts), bool)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        ok &= np.cross(tri[b] - tri[a], pts - tri[a]) @ n >= 0
+    return ok
+
+
+def default_spec(scene):
+    vol = float(np.prod(np.asarray(scene.domain.max, float) - np.asarray(scene.domain.min, float)))
+    return BlocksSpec(BLOCK_DEFAULTS["blocks.min_volume_fraction"] * vol, None, BLOCK_DEFAULTS["blocks.cohesion"],
+                      BLOCK_DEFAULTS["blocks.tensile"], BLOCK_DEFAULTS["blocks.friction"], BLOCK_DEFAULTS["blocks.seed"])
+
+
+class _Pool:
+    """The blocks being cut, with their bounding boxes as arrays for the vectorised candidate search."""
+
+    def __init__(self, blocks):
+        self.blocks = list(blocks)
+        self._box()
+
+    def _box(self):
+        self.lo = np.array([b.v.min(0) for b in self.blocks]).reshape(-1, 3)
+        self.hi = np.array([b.v.max(0) for b in self.blocks]).reshape(-1, 3)
+
+    def crossing(self, n, d, lo=None, hi=None):
+        """Indices of blocks whose box the plane n . x = d crosses (and that overlap the box lo..hi)."""
+        c, h = (self.lo + self.hi) / 2, (self.hi - self.lo) / 2
+        sel = np.abs(c @ n - d) < np.abs(h) @ np.abs(n)
+        if lo is not None:
+            sel &= np.all(self.lo <= hi, axis=1) & np.all(self.hi >= lo, axis=1)
+        return np.nonzero(sel)[0]
+
+    def replace(self, repl):
+        """Replace block i by the list repl[i] for every i in the dict ``repl``."""
+        if not repl:
+            return
+        out = []
+        for i, b in enumerate(self.blocks):
+            out += repl[i] if i in repl else [b]
+        self.blocks = out
+        self._box()
+
+
+def _cut_plane(pool, n, d, src, min_volume, stats, lo=None, hi=None, accept=None):
+    """Cut every block of the pool that the plane crosses and ``accept(block, s)`` allows; sliver cuts skipped."""
+    repl = {}
+    for i in pool.crossing(n, d, lo, hi).tolist():
+        b = pool.blocks[i]
+        s = signed(b, n, d)
+        if not ((s < 0).any() and (s > 0).any()):
+            continue
+        if accept is not None and not accept(b, s):
+            continue
+        below, above = split(b, n, d, src, s)
+        if below.volume() < min_volume or above.volume() < min_volume:
+            stats["sliver_cuts_skipped"] = stats.get("sliver_cuts_skipped", 0) + 1
+            continue
+        repl[i] = [below, above]
+    pool.replace(repl)
+    return repl
+
+
+def _fabric(pool, spec, sources, lo, hi, stats):
+    rng = np.random.default_rng(spec.seed)
+    for fs in spec.joint_sets:
+        n = dip_to_normal(fs.dip, fs.dip_direction)
+        sources.append(Source(fs.name, JOINT, "plane", normal=n))
+        src = len(sources) - 1
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        s = corners @ n
+        slo, shi = s.min(), s.max()
+        elo = ehi = None
+        if fs.extent is not None:
+            elo, ehi = fs.extent
+            e = np.array([[x, y, z] for x in (elo[0], ehi[0]) for y in (elo[1], ehi[1]) for z in (elo[2], ehi[2])]) @ n
+            slo, shi = max(slo, e.min()), min(shi, e.max())
+        d0 = float(n @ fs.origin)
+        k0, k1 = int(np.ceil((slo - d0) / fs.spacing)), int(np.floor((shi - d0) / fs.spacing))
+        for k in range(k0, k1 + 1):
+            d = d0 + k * fs.spacing
+            if not slo < d < shi:
+                continue
+            _cut_plane(pool, n, d, src, spec.min_volume, stats, elo, ehi, _fabric_accept(fs, n, d, rng))
+        stats["planes"] = stats.get("planes", 0) + max(0, k1 - k0 + 1)
+
+
+def _fabric_accept(fs, n, d, rng):
+    def accept(b, s):
+        if fs.extent is not None:
+            pts = section(b, n, d, s)
+            eps = REL * b.diag()
+            if len(pts) == 0 or not (np.all(pts >= fs.extent[0] - eps) and np.all(pts <= fs.extent[1] + eps)):
+                return False
+        return fs.persistence >= 1.0 or rng.random() < fs.persistence
+
+    return accept
+
+
+def _excavations(pool, scene, sources, stats):
+    for ex in scene.excavations:
+        ter = Terrain(ex.vertices, ex.faces, f"{ex.key} ({ex.name})")
+        sources.append(Source(ex.name, EXCAVATION, "surface"))
+        sources.append(Source(f"{ex.name} (split)", INTACT, "surface"))
+        wall, cut = len(sources) - 2, len(sources) - 1
+        repl = {}
+        for i, b in enumerate(pool.blocks):
+            out = excavate_block(b, ter, wall, cut)
+            if len(out) != 1 or out[0] is not b:
+                repl[i] = out
+        pool.replace(repl)
+
+
+def _cavities(pool, scene, sources, stats):
+    for cv in getattr(scene, "cavities", []):
+        cav = CavityCut(cv.mesh, cv.name)
+        sources.append(Source(cv.name, EXCAVATION, "surface"))
+        sources.append(Source(f"{cv.name} (split)", INTACT, "surface"))
+        wall, cut = len(sources) - 2, len(sources) - 1
+        repl = {}
+        for i in np.nonzero(np.all(pool.lo <= cv.mesh.hi, axis=1) & np.all(pool.hi >= cv.mesh.lo, axis=1))[0]:
+            b = pool.blocks[i]
+            out = carve_block(b, cav, wall, cut)
+            if len(out) != 1 or out[0] is not b:
+                repl[int(i)] = out
+        pool.replace(repl)
+
+
+def _disc_list(scene, spec):
+    """(name, centre, unit normal, radius, thickness) of every disc and DFN fracture that cuts."""
+    chosen = None if spec.cut_by is None else set(spec.cut_by)
+    out = [(d.name, d.centre, d.normal, d.radius, d.thickness) for d in scene.discontinuities
+           if chosen is None or d.name in chosen]
+    net = network_for(scene)
+    if net is not None:
+        for k in range(len(net)):
+            if chosen is None or net.set_names[net.set_index[k]] in chosen:
+                out.append((net.ids[k], net.centres[k], net.normals[k], float(net.radii[k]), float(net.thickness[k])))
+    return out
+
+
+def _disc_box(c, n, r, t):
+    ext = r * np.sqrt(np.clip(1.0 - n * n, 0.0, 1.0)) + t / 2 * np.abs(n)
+    return c - ext, c + ext
+
+
+def _discs(pool, scene, spec, sources, stats):
+    for name, c, n, r, t in _disc_list(scene, spec):
+        c, n = np.asarray(c, float), np.asarray(n, float)
+        kind = FAULT if t > 0 else JOINT
+        lo, hi = _disc_box(c, n, r, t)
+        for off in ((-t / 2, t / 2) if t > 0 else (0.0,)):
+            cc = c + off * n
+            sources.append(Source(name, kind, "disc", centre=cc, normal=n, radius=r))
+            repl = _cut_plane(pool, n, float(n @ cc), len(sources) - 1, spec.min_volume, stats, lo, hi,
+                              lambda b, s, cc=cc: disc_reaches(b, cc, n, r))
+            stats["disc_cuts"] = stats.get("disc_cuts", 0) + len(repl)
+        if t > 0:
+            _fault_material(pool, c, n, r, t, name, lo, hi)
+
+
+def _fault_material(pool, c, n, r, t, name, lo, hi):
+    for i in np.nonzero(np.all(pool.lo <= hi, axis=1) & np.all(pool.hi >= lo, axis=1))[0]:
+        b = pool.blocks[i]
+        s = b.v @ n - n @ c
+        if s.min() < -t / 2 - REL * b.diag() or s.max() > t / 2 + REL * b.diag():
+            continue
+        g = b.volume_centroid()[1] - c
+        if np.linalg.norm(g - (g @ n) * n) <= r:
+            b.material = name
+
+
+def _surface_discontinuities(pool, scene, spec, sources, stats):
+    chosen = None if spec.cut_by is None else set(spec.cut_by)
+    for sd in getattr(scene, "surfaces", []):
+        if chosen is not None and sd.name not in chosen:
+            continue
+        kind = FAULT if sd.thickness > 0 else JOINT
+        for tri in sd.mesh.vertices[sd.mesh.faces]:
+            nrm = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+            ln = float(np.linalg.norm(nrm))
+            if ln == 0:
+                continue
+            n = nrm / ln
+            sources.append(Source(sd.name, kind, "triangle", normal=n, tri=tri.copy()))
+            repl = _cut_plane(pool, n, float(n @ tri[0]), len(sources) - 1, spec.min_volume, stats,
+                              tri.min(0), tri.max(0), lambda b, s, tri=tri: triangle_reaches(b, tri))
+            stats["facet_cuts"] = stats.get("facet_cuts", 0) + len(repl)
+
+
+def build_blocks(scene, progress=None) -> BlockModel:
+    """The block model of an sgim Scene (sgim.scene.load_scene); see the module docstring."""
+    spec = scene.blocks if getattr(scene, "blocks", None) is not None else default_spec(scene)
+    lo, hi = np.asarray(scene.domain.min, float), np.asarray(scene.domain.max, float)
+    v = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
+    sources = [Source("domain", DOMAIN, "box")]
+    pool = _Pool([TBlock(v, [list(f) for f in BOX_FACES], [0] * 6)])
+    stats, times = {}, {}
+    stages = (("joint sets", lambda: _fabric(pool, spec, sources, lo, hi, stats)),
+              ("excavation", lambda: _excavations(pool, scene, sources, stats)),
+              ("cavities", lambda: _cavities(pool, scene, sources, stats)),
+              ("discs", lambda: _discs(pool, scene, spec, sources, stats)),
+              ("surfaces", lambda: _surface_discontinuities(pool, scene, spec, sources, stats)))
+    for name, run in stages:
+        t0 = time.perf_counter()
+        run()
+        times[name] = time.perf_counter() - t0
+        if progress is not None:
+            progress(name, len(pool.blocks), times[name])
+    stats["seconds"] = times
+    return BlockModel(pool.blocks, sources, lo, hi, spec.min_volume, stats)
+
+
+__all__ = ["KINDS", "BlockModel", "Source", "build_blocks"]
