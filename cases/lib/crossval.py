@@ -1,6 +1,7 @@
 """Cross-validation: the same models in-house, in YADE and in LIGGGHTS, against analytical references.
 
-    cases crossval [--cases hang,column,rocking,beam,wedge,blocks] [--engines dda,yade,liggghts] [--json] [--keep DIR]
+    cases crossval [--cases hang,column,rocking,beam,wedge,blocks,shear_beam] [--engines dda,yade,liggghts]
+                   [--json] [--keep DIR]
 
 Each case runs one model (cases/scenes/crossval/*.toml, written by cases/make/crossval.py) in every engine through the
 adapters (``adapters.deck.export`` + ``adapters.deck.run``; the in-house engine through ``adapters.inhouse``)
@@ -28,6 +29,8 @@ and compares it with a reference computed here, independently of every engine:
   normal, where a smooth joint would have pushed), and the intact cantilever damped from its scene alone
   (viscous_damping = "critical": LIGGGHTS' fix viscous, in-house a force -c v; YADE has no such damping)
   against the static solution of its spring network (tip sag).
+- shear_beam: a simple-cubic cantilever of normal + shear bonds (a mechanism with central bonds alone) against the
+  linear static solution of its network with six degrees of freedom per sphere (cases/lib/crossval_shear.py).
 - incline, block_wedge: a polyhedral block on a 30 degree incline (friction 20) and the paper's wedge at
   friction 18 degrees: distance slid in 1 s, in-house DDA and YADE Polyhedra, against s = 1/2 a t^2 with
   a = g (sin a - tan phi cos a) and a = g sin psi5 (1 - tan phi / tan phi_c).
@@ -45,7 +48,7 @@ import sys
 import tempfile
 import time
 import tomllib
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,12 +61,13 @@ from cases.make.crossval import WEDGE
 
 CV = SCENES / "crossval"
 ENGINES = ("dda", "yade", "liggghts")
-CASES = ("hang", "column", "rocking", "beam", "wedge", "blocks")
+CASES = ("hang", "column", "rocking", "beam", "wedge", "blocks", "shear_beam")
 SETTLE_TOLERANCE = 1e-3  # the damped beam against its static sag: 0.1 %
 ROCKING_TOLERANCE = 1e-3  # in-house against YADE: 0.1 %
 HANG = ("intact", "fault", "joint", "small_joint")
 G = 9.81
 TOLERANCE = 0.05  # the agreement the table checks: 5 % of the reference
+WEDGE_REST = 1e-4  # a wedge trial that moves less than this many radii in its last quarter has come to rest
 
 
 @dataclass
@@ -307,62 +311,128 @@ def _wedge_line(w):
     return geo, (o - p5) / np.linalg.norm(o - p5)
 
 
-def case_wedge(engines, work, say, timeout, iterations=6):
-    """Bisection of the sphere wedge's joint friction between 0.85 and 1.15 x Hoek & Bray's critical angle."""
+def rigid_core(run, bonds=3):
+    """(n,) bool: the spheres a wedge run keeps: the fixed ones and the free spheres that at least `bonds` bonds
+    tie to kept spheres (peeled off one layer after another until none has fewer). The bonds carry no moment
+    (YADE's JCFpm, the in-house bond law): a free sphere held by one bond rolls round its neighbour and one
+    held by two swings about the line through the two bond points, so it never comes to rest and jolts the
+    wedge it hangs on (the r = 0.5 wedge has five such spheres: one on a single bond swung 0.65 m in 1.2 s)."""
+    keep = np.ones(run.n, bool)
+    fixed = np.asarray(run.fixed, bool)
+    while True:
+        b = keep[run.bond_i] & keep[run.bond_j]
+        held = np.bincount(np.concatenate([run.bond_i[b], run.bond_j[b]]), minlength=run.n)
+        drop = keep & ~fixed & (held < bonds)
+        if not drop.any():
+            return keep
+        keep &= ~drop
+
+
+def without(run, keep):
+    """A copy of the SphereRun `run` with the spheres `keep` ((n,) bool) alone, and the bonds, joints and cut pairs
+    between them (their order kept, sphere indices renumbered)."""
+    new = np.full(run.n, -1, np.int64)
+    new[keep] = np.arange(int(keep.sum()))
+    bond = keep[run.bond_i] & keep[run.bond_j]
+    joint = keep[run.joint_i] & keep[run.joint_j]
+    cut = keep[run.cut_i] & keep[run.cut_j]
+    return replace(
+        run, centers=np.asarray(run.centers)[keep], radii=np.asarray(run.radii)[keep],
+        colour=np.asarray(run.colour)[keep], fixed=np.asarray(run.fixed, bool)[keep],
+        bond_i=new[run.bond_i[bond]], bond_j=new[run.bond_j[bond]],
+        **{k: np.asarray(getattr(run, k))[bond] for k in ("bond_len0", "bond_kn", "bond_ks", "bond_ft", "bond_fs",
+                                                           "bond_zeta")},
+        joint_i=new[run.joint_i[joint]], joint_j=new[run.joint_j[joint]],
+        joint_disc=np.asarray(run.joint_disc)[joint], joint_normal=np.asarray(run.joint_normal).reshape(-1, 3)[joint],
+        cut_i=new[run.cut_i[cut]], cut_j=new[run.cut_j[cut]], force=run.force[keep],
+        prescribed=run.prescribed[keep], velocity=run.velocity[keep])
+
+
+def wedge_run(path=None, core=True):
+    """The wedge's SphereRun (scene `path`, default cases/scenes/crossval/wedge.toml), without the free spheres
+    that fewer than three bonds hold (rigid_core) unless `core` is false."""
     from adapters.spec import from_scene
 
-    path = CV / "wedge.toml"
-    base = from_scene(path)
+    run = from_scene(path or CV / "wedge.toml")
+    return without(run, rigid_core(run)) if core else run
+
+
+def wedge_slides(s, run, geo):
+    """A wedge trial slides when the wedge's displacement along the line of intersection (s at T/2, 3T/4, T) grows
+    faster in the last quarter than in the one before and by more than WEDGE_REST radii: a wedge that holds
+    comes to rest after the start-up (its last quarter moves by 1e-9 m at r = 0.5), one that slides accelerates.
+    No acceleration is asked for: the criterion before this one called a trial sliding only when the last
+    quarter moved 7/32 x 1 % g sin(plunge) T^2 (1 % of the driving acceleration), which by itself puts the onset
+    0.92 % low (tan phi must be 1 % below tan phi_c, i.e. phi 0.18 deg lower) and, with local damping's slower
+    slide and the start-up, 1.17 % low."""
+    step_1, step_2 = s[1] - s[0], s[2] - s[1]
+    return step_2 > step_1 and step_2 > WEDGE_REST * float(np.min(run.radii))
+
+
+def wedge_onset(engine, work, timeout=None, path=None, bracket=(0.95, 1.05), iterations=7, core=True,
+                moving=wedge_slides):
+    """Bisection of the sphere wedge's joint friction in `engine`: starts from `bracket` x Hoek & Bray's critical
+    angle (widened while both ends agree), then `iterations` halvings. `moving(s, run, geo)` decides a trial from
+    the displacement s at T/2, 3T/4, T (default wedge_slides). Returns a dict: lo (slides), hi (holds), found
+    (False when no bracket was found: lo and hi then name the last two ends tried), trials [(phi, slides, s)],
+    the run (its spheres) and the critical angle phi_c."""
     geo, line = _wedge_line(WEDGE)
-    phi_c = geo.critical_friction
+    base = wedge_run(path, core)
     wedge = ~base.fixed
     mass = base.radii[wedge] ** 3
-    T = base.duration
-    threshold = 7.0 / 32.0 * G * math.sin(math.radians(geo.line_plunge)) * 0.01 * T * T
+    trials = []
+
+    def slides(phi):
+        run = replace(base, joint_friction_deg=float(phi))
+        wk = Path(work) / f"wedge_{engine}_{phi:.4f}"
+        wk.mkdir(parents=True, exist_ok=True)
+        run.save(wk / "run.npz")
+        res = run_engine(engine, wk / "run.npz", wk, timeout, run=run)
+        s = _along(res, wedge, mass, line, run.duration)
+        trials.append((float(phi), bool(moving(s, run, geo)), [float(x) for x in s]))
+        return trials[-1][1]
+
+    phi_c = geo.critical_friction
+    lo, hi = bracket[0] * phi_c, bracket[1] * phi_c
+    s_lo, s_hi = slides(lo), slides(hi)
+    while not s_lo and lo > 2.0:  # holds at both ends: look lower
+        hi, lo = lo, 0.5 * lo
+        s_lo = slides(lo)
+    while s_hi and hi < 60.0:  # slides at both ends: look higher
+        lo, hi = hi, min(1.5 * hi, 80.0)
+        s_hi = slides(hi)
+    found = s_lo and not s_hi
+    for _ in range(iterations if found else 0):
+        mid = 0.5 * (lo + hi)
+        if slides(mid):
+            lo = mid
+        else:
+            hi = mid
+    return dict(lo=lo, hi=hi, found=found, where="slides" if s_hi else "holds", trials=trials, run=base,
+                phi_c=phi_c)
+
+
+def case_wedge(engines, work, say, timeout, iterations=7):
+    """The sphere wedge's onset by bisection of the joint friction (wedge_onset) in every engine."""
     rows = []
+    phi_c = wedge_reference(WEDGE).critical_friction
     for eng in engines:
         t0 = time.perf_counter()
-        trials = []
-
-        def slides(phi):
-            run = from_scene(path)
-            run.joint_friction_deg = float(phi)
-            wk = Path(work) / f"wedge_{eng}_{phi:.4f}"
-            wk.mkdir(parents=True, exist_ok=True)
-            run.save(wk / "run.npz")
-            res = run_engine(eng, wk / "run.npz", wk, timeout, run=run)
-            s = _along(res, wedge, mass, line, T)
-            moving = s[2] - s[1] > threshold and s[2] - s[1] > s[1] - s[0]
-            trials.append((float(phi), bool(moving), [float(x) for x in s]))
-            return moving
-
-        lo, hi = 0.85 * phi_c, 1.15 * phi_c
-        s_lo, s_hi = slides(lo), slides(hi)
-        while not s_lo and lo > 2.0:  # holds at both ends: look lower
-            hi, lo = lo, 0.5 * lo
-            s_lo = slides(lo)
-        while s_hi and hi < 60.0:  # slides at both ends: look higher
-            lo, hi = hi, min(1.5 * hi, 80.0)
-            s_hi = slides(hi)
-        if s_lo and not s_hi:
-            for _ in range(iterations):
-                mid = 0.5 * (lo + hi)
-                if slides(mid):
-                    lo = mid
-                else:
-                    hi = mid
+        b = wedge_onset(eng, work, timeout, iterations=iterations)
+        lo, hi, run = b["lo"], b["hi"], b["run"]
+        if b["found"]:
             got = 0.5 * (lo + hi)
             err = got / phi_c - 1.0
-            note = f"bracket {lo:.2f}-{hi:.2f}, {len(trials)} runs"
+            note = (f"r = {float(np.min(run.radii)):g} m, {int((~run.fixed).sum())} free spheres, bracket "
+                    f"{lo:.3f}-{hi:.3f}, {len(b['trials'])} runs")
             if abs(err) > TOLERANCE and _wedge_note(eng):
                 note += "; " + _wedge_note(eng)
-            rows.append(Row("wedge", eng, f"{got:.2f} deg", f"{phi_c:.2f} deg (Hoek & Bray)", f"{100 * err:+.2f} %",
+            rows.append(Row("wedge", eng, f"{got:.3f} deg", f"{phi_c:.3f} deg (Hoek & Bray)", f"{100 * err:+.2f} %",
                             abs(err) <= TOLERANCE, time.perf_counter() - t0, note=note,
                             value=got, ref_value=phi_c, err_value=err))
         else:
-            where = "slides" if s_hi else "holds"
-            rows.append(Row("wedge", eng, f"{where} at {lo:.1f} and {hi:.1f} deg", f"{phi_c:.2f} deg (Hoek & Bray)",
-                            "no onset found", False, time.perf_counter() - t0,
+            rows.append(Row("wedge", eng, f"{b['where']} at {lo:.1f} and {hi:.1f} deg",
+                            f"{phi_c:.3f} deg (Hoek & Bray)", "no onset found", False, time.perf_counter() - t0,
                             note=_wedge_note(eng), ref_value=phi_c))
         if say:
             say(_line(rows[-1]))
@@ -453,6 +523,21 @@ def _generate_params(scene):
     return {k: gen[k] for k in ("joint_a", "joint_b", "face", "height")}
 
 
+def case_shear_beam(engines, work, say, timeout):
+    """The cantilever of normal + shear bonds against the network's 6-DOF static solution (crossval_shear.py)."""
+    from cases.lib.crossval_shear import shear_beam  # scipy and the adapters: loaded when the case runs
+
+    rows = []
+
+    def emit(**fields):
+        rows.append(Row(**fields))
+        if say:
+            say(_line(rows[-1]))
+
+    shear_beam(engines, Path(work), timeout, run_engine, emit)
+    return rows
+
+
 # -- table -----------------------------------------------------------------------------------------------
 COLUMNS = ("case", "engine", "result", "reference", "error", "ok", "wall s", "note")
 
@@ -489,7 +574,7 @@ def crossval(cases=CASES, engines=ENGINES, work=None, say=None, timeout=1800.0):
     try:
         for case in cases:
             fn = {"hang": case_hang, "column": case_column, "rocking": case_rocking, "beam": case_beam,
-                  "wedge": case_wedge, "blocks": case_blocks}[case]
+                  "wedge": case_wedge, "blocks": case_blocks, "shear_beam": case_shear_beam}[case]
             rows += fn(engines, work, say, timeout)
     finally:
         if own:

@@ -14,6 +14,9 @@
   drop the contact across the joint, [spheres] liggghts_joints = "open"), and intact,
   damped by [simulation] viscous_damping = "critical" alone (LIGGGHTS' fix viscous, in-house -c v): its static
   sag.
+- shear_beam: a 0.36 x 0.12 x 0.12 m simple-cubic cantilever (r = 0.015, normal + shear bonds, ks = 0.1 kn) fixed
+  at x < 0.03, heavily damped: its static tip sag against the 6-DOF solution of the network (a mechanism with
+  central bonds alone).
 - wedge: the paper's wedge (joints 45/005 and 55/135, face 65/065, height 10 m) as FCC spheres (r = 0.5): the
   wedge's spheres bonded, the rock behind the joints fixed, the joints smooth: the friction at which it starts to
   slide against Hoek & Bray and the DDA block wedge.
@@ -61,10 +64,10 @@ def _table(name, d, array=False):
     return "\n".join([head] + [f"{k} = {_fmt(v)}" for k, v in d.items()]) + "\n"
 
 
-def sgim_scene(name, comment, lo, hi, radius, discs=(), cavities=(), rule="colour"):
+def sgim_scene(name, comment, lo, hi, radius, discs=(), cavities=(), rule="colour", kind="fcc"):
     parts = [f"# {comment}\n# Written by cases/make/crossval.py.\n", f'name = "{name}"\n',
              _table("domain", {"min": list(lo), "max": list(hi)}),
-             _table("packing", {"kind": "fcc", "radius": radius}), _table("bonds", {"rule": rule})]
+             _table("packing", {"kind": kind, "radius": radius}), _table("bonds", {"rule": rule})]
     parts += [_table("discontinuity", d, True) for d in discs]
     parts += [_table("cavity", c, True) for c in cavities]
     return "\n".join(parts)
@@ -151,6 +154,17 @@ def write_all(folder=HERE):
         "0.3 s (16 / omega_1) its sag is the static one.", "beam_model.toml",
         {"duration": 0.3, "record_every": 0.01, "viscous_damping": "critical", "frames": 1}, beam_sim,
         beam_spheres)
+    files["shear_beam_model.toml"] = sgim_scene(
+        "shear_beam_model", "A 0.36 x 0.12 x 0.12 m cantilever of bonded simple-cubic spheres, r = 0.015 (12 x 4 x 4).",
+        (0.0, 0.0, 0.0), (0.36, 0.12, 0.12), 0.015, kind="cubic")
+    files["shear_beam.toml"] = dda_scene(
+        "shear_beam", "The cubic cantilever fixed at its first layer (x < 0.03), normal + shear bonds (ks = 0.1 kn), "
+        "under gravity; local damping 0.7 brings it to rest: its tip sag against the static solution of the network "
+        "with six degrees of freedom per sphere (cases/lib/crossval_shear.py). With central bonds alone the lattice "
+        "is a mechanism: the shear springs and the rotations they couple carry it.", "shear_beam_model.toml",
+        {"duration": 0.15, "record_every": 0.005, "local_damping": 0.7, "frames": 1},
+        {"kn": 1e7, "ks": 5e6, "friction": 30.0},
+        {"density": 2600.0, "fixed": ["x<0.03"], "bond_young": 1e9, "bond_shear_ratio": 0.1})
     lo, hi, cavities = wedge_cavities()
     w = WEDGE
     discs = [dict(name=f"joint {n}", centre=[0.0, 0.0, 0.0], dip=d[0], dip_direction=d[1], radius=60.0,
