@@ -235,3 +235,24 @@ def edges_csr(nv, fptr, fidx):
                 out[m, 1] = q
                 m += 1
     return out[:m].copy()
+
+
+@njit(cache=True)
+def face_planes_csr(v, fptr, fidx):
+    """Outward unit normals (Newell's method) and offsets (through the face's vertex mean) of every face."""
+    nf = fptr.shape[0] - 1
+    n = np.zeros((nf, 3))
+    d = np.zeros(nf)
+    for f in range(nf):
+        a0, m = fptr[f], fptr[f + 1] - fptr[f]
+        c = np.zeros(3)
+        for k in range(m):
+            p, q = v[fidx[a0 + k]], v[fidx[a0 + (k + 1) % m]]
+            n[f, 0] += (p[1] - q[1]) * (p[2] + q[2])
+            n[f, 1] += (p[2] - q[2]) * (p[0] + q[0])
+            n[f, 2] += (p[0] - q[0]) * (p[1] + q[1])
+            c += p
+        ln = math.sqrt((n[f] ** 2).sum())
+        n[f] /= ln
+        d[f] = (n[f] * c).sum() / m
+    return n, d

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from ._geocut import edges_csr, overlap_mask, signed_snapped, split_csr, volume_centroid_csr
+from ._geocut import edges_csr, face_planes_csr, overlap_mask, signed_snapped, split_csr, volume_centroid_csr
 
 REL = 1e-9  # snapping tolerance, relative to a block's diagonal
 
@@ -79,16 +79,7 @@ def volume_centroid(v, faces):
 
 def face_planes(b: TBlock):
     """Outward unit normals (k, 3) and offsets (k,) of every face (Newell's method)."""
-    faces = b.faces
-    n = np.zeros((len(faces), 3))
-    d = np.zeros(len(faces))
-    for k, f in enumerate(faces):
-        p = b.v[f]
-        m = np.cross(p, np.roll(p, -1, axis=0)).sum(0)
-        m /= np.linalg.norm(m)
-        n[k] = m
-        d[k] = float(p.mean(0) @ m)
-    return n, d
+    return face_planes_csr(b.v, b.fptr, b.fidx)
 
 
 def signed(b: TBlock, n, d):

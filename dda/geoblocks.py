@@ -42,7 +42,7 @@ from sgim.blocktable import BlocksSpec
 from sgim.dfn import network_for
 from sgim.geometry import dip_to_normal
 
-from .blockcut import REL, TBlock, disc_reaches, section, signed, split, triangle_reaches
+from .blockcut import REL, TBlock, disc_reaches, face_planes, section, signed, split, triangle_reaches
 from .blockspec import BlockSpec
 from .geoexcavate import CavityCut, Terrain, carve_block, excavate_block
 
@@ -301,6 +301,72 @@ def _surface_discontinuities(pool, scene, spec, sources, stats):
             stats["facet_cuts"] = stats.get("facet_cuts", 0) + len(repl)
 
 
+def _hull_block(a, b, na, da):
+    """The union of blocks a (face planes na, da) and b as one TBlock when it is convex, each face taking the
+    source of the face of a or b on its plane; None otherwise."""
+    nb, db = face_planes(b)
+    eps = 1e-7 * max(a.diag(), b.diag())
+    shared = (na @ nb.T < -1 + 1e-9) & (np.abs(da[:, None] + db[None, :]) <= eps)
+    if not shared.any():
+        return None
+    # a and b on either side of a shared plane: their union is convex exactly when each lies inside the other's
+    # remaining face planes (the union is then the intersection of those planes)
+    ia, ib = (int(x[0]) for x in np.nonzero(shared))
+    oa, ob = np.arange(len(na)) != ia, np.arange(len(nb)) != ib
+    if (b.v @ na[oa].T - da[oa] > eps).any() or (a.v @ nb[ob].T - db[ob] > eps).any():
+        return None
+    lo, hi = np.minimum(a.v.min(0), b.v.min(0)), np.maximum(a.v.max(0), b.v.max(0))
+    box = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
+    h = TBlock(box, [list(f) for f in BOX_FACES], [-1] * 6, a.material if a.volume() >= b.volume() else b.material)
+    for n, d, src in ((na[oa], da[oa], a.src[oa]), (nb[ob], db[ob], b.src[ob])):
+        for k in range(len(n)):
+            h = split(h, n[k], d[k], src[k])[0]
+    va, vb = a.volume(), b.volume()
+    if abs(h.volume() - va - vb) > 1e-9 * (va + vb):
+        return None
+    hn, hd = face_planes(h)
+    for k in np.nonzero(h.src < 0)[0]:  # box faces on a face plane of a or b: that face's source
+        for n, d, src in ((na, da, a.src), (nb, db, b.src)):
+            hit = np.nonzero((n @ hn[k] > 1 - 1e-9) & (np.abs(d - hd[k]) <= eps))[0]
+            if len(hit):
+                h.src[k] = src[hit[0]]
+                break
+        else:
+            return None
+    return h
+
+
+def _merge_slivers(pool, min_volume, stats):
+    """Each block below min_volume joins a neighbour when their union is convex (volume kept, nothing dropped);
+    the others stay as they are (counted in summary()["small_blocks"])."""
+    vol = np.array([b.volume() for b in pool.blocks])
+    gone, merged = set(), 0
+    for i in np.argsort(vol).tolist():
+        if vol[i] >= min_volume or i in gone:
+            continue
+        eps = REL * pool.blocks[i].diag()
+        near = np.nonzero(np.all(pool.lo <= pool.hi[i] + eps, axis=1) & np.all(pool.hi >= pool.lo[i] - eps, axis=1))[0]
+        a = pool.blocks[i]
+        na, da = face_planes(a)
+        for j in sorted(near.tolist(), key=lambda j: -vol[j]):
+            if j == i or j in gone:
+                continue
+            s = pool.blocks[j].v @ na.T - da  # b must lie on the far side of a face plane of a, touching it
+            tol = 1e-7 * max(a.diag(), float(np.linalg.norm(pool.hi[j] - pool.lo[j])))
+            if not ((s >= -tol).all(0) & ((np.abs(s) <= tol).sum(0) >= 3)).any():
+                continue
+            h = _hull_block(a, pool.blocks[j], na, da)
+            if h is not None:
+                pool.blocks[j] = h
+                vol[j] = h.volume()
+                pool.lo[j], pool.hi[j] = h.v.min(0), h.v.max(0)
+                gone.add(i)
+                merged += 1
+                break
+    stats["slivers_merged"] = merged
+    pool.replace({i: [] for i in gone})
+
+
 def build_blocks(scene, progress=None) -> BlockModel:
     """The block model of an sgim Scene (sgim.scene.load_scene); see the module docstring."""
     spec = scene.blocks if getattr(scene, "blocks", None) is not None else default_spec(scene)
@@ -313,7 +379,8 @@ def build_blocks(scene, progress=None) -> BlockModel:
               ("excavation", lambda: _excavations(pool, scene, sources, stats)),
               ("cavities", lambda: _cavities(pool, scene, sources, stats)),
               ("discs", lambda: _discs(pool, scene, spec, sources, stats)),
-              ("surfaces", lambda: _surface_discontinuities(pool, scene, spec, sources, stats)))
+              ("surfaces", lambda: _surface_discontinuities(pool, scene, spec, sources, stats)),
+              ("slivers", lambda: _merge_slivers(pool, spec.min_volume, stats)))
     for name, run in stages:
         t0 = time.perf_counter()
         run()
