@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .geometry import MAX_COORD
 from .reader import COORD, SIZE
 
 # the defaults of the optional keys (docs/scenes.md lists them with every other key)
@@ -74,8 +75,8 @@ def _read_set(rd, js, key, k, domain):
         rd.err(key, js, "must be a table")
     rd.known(js, SET_KEYS, key)
     name = rd.string(js, "name", f"{key}.name", f"B{k + 1}")
-    dip = rd.number(js, "dip", f"{key}.dip", lo=0.0, hi=90.0, unit=" degrees")
-    dd = rd.number(js, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0, unit=" degrees")
+    dip = rd.number(js, "dip", f"{key}.dip", lo=0.0, hi=90.0)
+    dd = rd.number(js, "dip_direction", f"{key}.dip_direction", lo=0.0, hi=360.0)
     spacing = rd.number(js, "spacing", f"{key}.spacing", positive=True, **SIZE)
     centre = (np.asarray(domain.min, float) + np.asarray(domain.max, float)) / 2
     origin = rd.vector(js, "origin", f"{key}.origin", default=centre, **COORD)
@@ -104,7 +105,7 @@ def read_blocks(rd, data, scene):
     lo, hi = np.asarray(scene.domain.min, float), np.asarray(scene.domain.max, float)
     vol = float(np.prod(hi - lo))
     mv = rd.number(bt, "min_volume", "blocks.min_volume", default=DEFAULTS["blocks.min_volume_fraction"] * vol,
-                   nonneg=True, hi=vol, unit=" m3")
+                   nonneg=True, hi=MAX_COORD ** 3, unit=" m3")
     cut_by = None
     if "cut_by" in bt:
         cut_by = rd.value(bt, "cut_by", "blocks.cut_by", None, "list of strings")
@@ -121,8 +122,7 @@ def read_blocks(rd, data, scene):
                            **STRESS),
         tensile=rd.number(bt, "tensile", "blocks.tensile", default=DEFAULTS["blocks.tensile"], nonneg=True,
                           **STRESS),
-        friction=rd.number(bt, "friction", "blocks.friction", default=DEFAULTS["blocks.friction"], lo=0.0, hi=89.0,
-                           unit=" degrees"),
+        friction=rd.number(bt, "friction", "blocks.friction", default=DEFAULTS["blocks.friction"], lo=0.0, hi=89.0),
         seed=rd.integer(bt, "seed", "blocks.seed", DEFAULTS["blocks.seed"], 0, 2**63 - 1),
     )
     sets = bt.get("joint_set", [])

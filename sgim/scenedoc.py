@@ -302,6 +302,27 @@ SGIM_KEYS = {
     "limits.max_spheres": K("-", "refuse a build estimated to make more spheres (a positive integer)",
                             type="integer", absent="the spheres that fill half of the machine's memory "
                                                    "(sgim/limits.py)"),
+    "blocks": K("", "the block model's own keys (dda/geoblocks.py); sgim build reads and checks them, then ignores "
+                    "them", absent="no joint sets, defaults below"),
+    "blocks.min_volume": K("m3", "a cut leaving a smaller piece is not made; smaller excavation pieces join a "
+                                 "neighbour when their union is convex", default="1e-6 x the domain's volume"),
+    "blocks.cut_by": K("", "names of [[discontinuity]] tables and [[joint_set]] sets that cut blocks",
+                       absent="all of them"),
+    "blocks.cohesion": K("Pa", "intact rock's cohesion (faces outside every disc)"),
+    "blocks.tensile": K("Pa", "intact rock's tensile strength"),
+    "blocks.friction": K("deg", "intact rock's friction angle"),
+    "blocks.seed": K("-", "seed of the joint sets' persistence draws"),
+    "blocks.joint_set": K("", "[[blocks.joint_set]]: a persistent joint set of the block fabric"),
+    "blocks.joint_set[].name": K("", "set name (the faces' source)", default='"B1", "B2", ... by position'),
+    "blocks.joint_set[].dip": K("deg", "dip of the planes"),
+    "blocks.joint_set[].dip_direction": K("deg", "dip direction of the planes"),
+    "blocks.joint_set[].spacing": K("m", "distance between neighbouring planes, along the normal"),
+    "blocks.joint_set[].origin": K("m", "a point one plane passes through", default="the domain's centre"),
+    "blocks.joint_set[].persistence": K("-", "chance that a plane cuts a block it crosses (0 < p <= 1)"),
+    "blocks.joint_set[].extent": K("", "box where the set exists: a plane cuts a block only when the block's "
+                                       "section lies in it", absent="everywhere"),
+    "blocks.joint_set[].extent.min": K("m", "lower corner of the box"),
+    "blocks.joint_set[].extent.max": K("m", "upper corner of the box; each coordinate > min"),
     "dfn": K("", "Monte-Carlo fracture network: seed and limit of the [[joint_set]] sampling, or a network file"),
     "dfn.seed": K("-", "seed of the network; the same seed gives the same network"),
     "dfn.max_fractures": K("-", "refuse a network that would need more fractures"),
@@ -381,6 +402,10 @@ def sgim_scenes():
         "render": {"hide_intact": True, "translucent": True, "cut_away": ["y<2", "z>8"], "width": 800,
                    "height": 600},
         "limits": {"max_spheres": 100000},
+        "blocks": {"min_volume": 0.01, "cut_by": ["J"], "cohesion": 2e6, "tensile": 1e6, "friction": 38.0, "seed": 4,
+                   "joint_set": [{"name": "B1", "dip": 80, "dip_direction": 130, "spacing": 2.0,
+                                  "origin": [1, 1, 1], "persistence": 0.8,
+                                  "extent": {"min": [0, 0, 0], "max": [10, 10, 6]}}]},
     }
     cav = copy.deepcopy(base) | {
         "cavity": [{"name": "T", "shape": "circular_tunnel", "path": [[0, 5, 5], [10, 5, 5]], "radius": 1.0,
