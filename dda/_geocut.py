@@ -256,3 +256,31 @@ def face_planes_csr(v, fptr, fidx):
         n[f] /= ln
         d[f] = (n[f] * c).sum() / m
     return n, d
+
+
+@njit(cache=True)
+def _turn(o, a, b):
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+@njit(cache=True)
+def hull2d(p):
+    """Counter-clockwise convex hull (monotone chain) of the 2D points p (n, 2); collinear points dropped."""
+    o = np.argsort(p[:, 1], kind="mergesort")
+    o = o[np.argsort(p[o, 0], kind="mergesort")]
+    q = p[o]
+    n = q.shape[0]
+    out = np.empty((2 * n + 1, 2))
+    k = 0
+    for i in range(n):  # lower chain
+        while k >= 2 and _turn(out[k - 2], out[k - 1], q[i]) <= 0.0:
+            k -= 1
+        out[k] = q[i]
+        k += 1
+    lo = k + 1
+    for i in range(n - 2, -1, -1):  # upper chain
+        while k >= lo and _turn(out[k - 2], out[k - 1], q[i]) <= 0.0:
+            k -= 1
+        out[k] = q[i]
+        k += 1
+    return out[:max(k - 1, 0)].copy()

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from ._geocut import edges_csr, face_planes_csr, overlap_mask, signed_snapped, split_csr, volume_centroid_csr
+from ._geocut import edges_csr, face_planes_csr, hull2d, overlap_mask, signed_snapped, split_csr, volume_centroid_csr
 
 REL = 1e-9  # snapping tolerance, relative to a block's diagonal
 
@@ -146,21 +146,10 @@ def section(b: TBlock, n, d, s=None):
 
 def convex_polygon_2d(p):
     """Counter-clockwise convex hull (monotone chain) of 2D points; collinear points dropped."""
-    pts = sorted(set(map(tuple, np.asarray(p, float).tolist())))
-    if len(pts) < 3:
-        return np.asarray(pts, float).reshape(-1, 2)
-
-    def half(seq):
-        out = []
-        for q in seq:
-            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (q[1] - out[-2][1])
-                                     - (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0])) <= 0:
-                out.pop()
-            out.append(q)
-        return out
-
-    lower, upper = half(pts), half(pts[::-1])
-    return np.asarray(lower[:-1] + upper[:-1], float)
+    p = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 2)
+    if len(p) < 3:
+        return p.copy()
+    return hull2d(p)
 
 
 def point_polygon_distance(poly, q):

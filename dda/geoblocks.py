@@ -145,14 +145,19 @@ class _Pool:
         return np.nonzero(sel)[0]
 
     def replace(self, repl):
-        """Replace block i by the list repl[i] for every i in the dict ``repl``."""
+        """Replace block i by the list repl[i] for every i in the dict ``repl`` (boxes computed for new blocks only)."""
         if not repl:
             return
-        out = []
-        for i, b in enumerate(self.blocks):
-            out += repl[i] if i in repl else [b]
-        self.blocks = out
-        self._box()
+        out, lo, hi = [], [], []
+        start = 0
+        for i in sorted(repl):
+            out += self.blocks[start:i] + repl[i]
+            lo += [self.lo[start:i], np.array([b.v.min(0) for b in repl[i]]).reshape(-1, 3)]
+            hi += [self.hi[start:i], np.array([b.v.max(0) for b in repl[i]]).reshape(-1, 3)]
+            start = i + 1
+        self.blocks = out + self.blocks[start:]
+        self.lo = np.concatenate(lo + [self.lo[start:]])
+        self.hi = np.concatenate(hi + [self.hi[start:]])
 
 
 def _cut_plane(pool, n, d, src, min_volume, stats, lo=None, hi=None, accept=None):
