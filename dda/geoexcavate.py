@@ -118,12 +118,15 @@ def _below(blk, ter, facets, edges, wall_src, split_src):
     facets = _footprint_overlaps(fp, ter.xy, facets, eps)
     if not facets:
         return "whole", [blk]
-    zmax, zmin = blk.v[:, 2].max(), blk.v[:, 2].min()
-    if zmax <= ter.zlo[facets].min() + eps:
+    # below (above) the plane of every facet over the footprint: below (above) the surface, which is one of
+    # those planes at every point of the footprint
+    f = np.asarray(facets)
+    gap = blk.v[:, 2:3] - (blk.v[:, :1] * ter.a[f] + blk.v[:, 1:2] * ter.b[f] + ter.c[f])
+    if gap.max() <= eps:
         return "whole", [blk]
     cross = _footprint_overlaps(fp, ter.seg, edges, eps)
     if not cross:
-        if zmin >= ter.zhi[facets].max() - eps:
+        if gap.min() >= -eps:
             return "empty", []
         return _clip_concave(blk, ter, facets, wall_src)
     # split by the vertical plane of the crossing edge whose line passes nearest the footprint's centre
