@@ -71,6 +71,16 @@ class TBlock:
         return volume_centroid_csr(self.v, self.fptr, self.fidx)[0]
 
 
+def fan(faces):
+    """Triangles (k, 3) of the faces' fans and the face of each triangle."""
+    tri, owner = [], []
+    for k, f in enumerate(faces):
+        for a, b in zip(f[1:-1], f[2:]):
+            tri.append((f[0], a, b))
+            owner.append(k)
+    return np.array(tri, dtype=np.int64).reshape(-1, 3), np.array(owner, dtype=np.int64)
+
+
 def volume_centroid(v, faces):
     """Exact volume and centroid of a closed polyhedron with outward faces (fan tetrahedra)."""
     b = TBlock(v, faces, np.zeros(len(faces), np.int64))

@@ -1,4 +1,4 @@
-"""Command line: ``dda run SCENE -o OUTDIR [--quiet]`` and ``dda wedge ...``.
+"""Command line: ``dda run SCENE -o OUTDIR [--quiet]``, ``dda wedge ...`` and ``dda blocks SCENE -o OUTDIR``.
 
 Bad input prints one line naming the file, key and value, exits with status 2 and leaves no output behind
 (the output is assembled in a temporary folder and moved into place at the end). The output folder is written
@@ -16,6 +16,7 @@ from pathlib import Path
 from sgim.common import FORCE_HELP, add_version, positive_int, progress_printer, run_command  # the CLI conventions
 
 from .answers import format_answer
+from .blockout import add_blocks_parser
 from .wedge import add_wedge_parser
 
 EXIT_BLOWUP = 3
@@ -51,6 +52,7 @@ def make_parser():
                                                     "the scene's [simulation] max_steps, default 1e8)")
     r.set_defaults(func=cmd_run)
     add_wedge_parser(sub)
+    add_blocks_parser(sub)
     return p
 
 

@@ -32,6 +32,7 @@ disc (triangle) and intact rock outside: :meth:`BlockModel.point_kinds` decides 
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 
@@ -39,10 +40,11 @@ import numpy as np
 
 from sgim.blocktable import DEFAULTS as BLOCK_DEFAULTS
 from sgim.blocktable import BlocksSpec
+from sgim.common import atomic_path, atomic_vtu
 from sgim.dfn import network_for
 from sgim.geometry import dip_to_normal
 
-from .blockcut import REL, TBlock, disc_reaches, face_planes, section, signed, split, triangle_reaches
+from .blockcut import REL, TBlock, disc_reaches, fan, face_planes, section, signed, split, triangle_reaches
 from .blockspec import BlockSpec
 from .geoexcavate import CavityCut, Terrain, carve_block, excavate_block
 
@@ -105,9 +107,10 @@ class BlockModel:
         mat = {}
         for b in self.blocks:
             mat[b.material] = mat.get(b.material, 0) + 1
+        some = len(vol) > 0
         return {"blocks": len(self.blocks), "volume": float(vol.sum()),
-                "smallest": float(vol.min()) if len(vol) else None, "median": float(np.median(vol)) if len(vol) else None,
-                "largest": float(vol.max()) if len(vol) else None, "materials": mat,
+                "smallest": float(vol.min()) if some else None, "median": float(np.median(vol)) if some else None,
+                "largest": float(vol.max()) if some else None, "materials": mat,
                 "small_blocks": int((vol < self.min_volume).sum()), "min_volume": self.min_volume, **self.stats}
 
 
@@ -121,8 +124,9 @@ def _in_triangle(tri, pts):
 
 def default_spec(scene):
     vol = float(np.prod(np.asarray(scene.domain.max, float) - np.asarray(scene.domain.min, float)))
-    return BlocksSpec(BLOCK_DEFAULTS["blocks.min_volume_fraction"] * vol, None, BLOCK_DEFAULTS["blocks.cohesion"],
-                      BLOCK_DEFAULTS["blocks.tensile"], BLOCK_DEFAULTS["blocks.friction"], BLOCK_DEFAULTS["blocks.seed"])
+    d = BLOCK_DEFAULTS
+    return BlocksSpec(d["blocks.min_volume_fraction"] * vol, None, d["blocks.cohesion"], d["blocks.tensile"],
+                      d["blocks.friction"], d["blocks.seed"])
 
 
 class _Pool:
@@ -396,4 +400,44 @@ def build_blocks(scene, progress=None) -> BlockModel:
     return BlockModel(pool.blocks, sources, lo, hi, spec.min_volume, stats)
 
 
-__all__ = ["KINDS", "BlockModel", "Source", "build_blocks"]
+# ---------------------------------------------------------------------------------------------------------
+# files (dda blocks, dda/blockout.py)
+
+
+def block_mesh(model):
+    """(points, triangles, cell data) of every block face of ``model``, one triangle fan per face."""
+    pts, tris, cols = [], [], {k: [] for k in ("block", "face", "kind", "source", "volume", "material")}
+    mats = sorted({b.material for b in model.blocks})
+    base = 0
+    for i, b in enumerate(model.blocks):
+        t, owner = fan(b.faces)
+        pts.append(b.v)
+        tris.append(t + base)
+        base += len(b.v)
+        src = b.src[owner]
+        cols["block"].append(np.full(len(t), i, np.int32))
+        cols["face"].append(owner.astype(np.int32))
+        cols["kind"].append(np.array([model.sources[s].kind for s in src], np.int32).reshape(-1))
+        cols["source"].append(src.astype(np.int32))
+        cols["volume"].append(np.full(len(t), b.volume()))
+        cols["material"].append(np.full(len(t), mats.index(b.material), np.int32))
+    cat = {k: np.concatenate(v) if v else np.zeros(0) for k, v in cols.items()}
+    return (np.vstack(pts) if pts else np.zeros((0, 3))), (np.vstack(tris) if tris else np.zeros((0, 3), int)), \
+        cat, mats
+
+
+def write_blocks(model, folder):
+    """blocks.vtu and summary.json of ``model`` in ``folder``."""
+    import meshio  # not at the top: meshio loads only when a VTU is written (it takes a while to import)
+
+    pts, tris, data, mats = block_mesh(model)
+    mesh = meshio.Mesh(pts, [("triangle", tris.astype(np.int64))], cell_data={k: [v] for k, v in data.items()})
+    atomic_vtu(f"{folder}/blocks.vtu", mesh)
+    summary = {"kinds": list(KINDS), **model.summary(), "materials_index": mats,
+               "sources": [{"name": s.name, "kind": KINDS[s.kind], "shape": s.shape} for s in model.sources]}
+    with atomic_path(f"{folder}/summary.json") as tmp, open(tmp, "w") as fh:
+        json.dump(summary, fh, indent=1)
+    return summary
+
+
+__all__ = ["KINDS", "BlockModel", "Source", "build_blocks", "write_blocks"]

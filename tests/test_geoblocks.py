@@ -221,3 +221,65 @@ def test_cut_by_selects_discs_and_min_volume_skips_sliver_cuts():
     assert big.stats["sliver_cuts_skipped"] > 0
     ref = 100 * 80 * 40 - FRUSTUM
     assert abs(big.volumes().sum() - ref) <= 1e-9 * ref
+
+
+def _toml(data):
+    """A minimal TOML writer for the scene dicts above (tables, arrays of tables, numbers, strings, lists)."""
+    def val(v):
+        if isinstance(v, str):
+            return f'"{v}"'
+        if isinstance(v, list):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + "}"
+        return repr(v)
+
+    lines = []
+    for k, v in data.items():
+        if not isinstance(v, (dict, list)) or (isinstance(v, list) and not all(isinstance(x, dict) for x in v)):
+            lines.append(f"{k} = {val(v)}")
+    for k, v in data.items():
+        if isinstance(v, dict):
+            lines.append(f"[{k}]")
+            subs = {a: b for a, b in v.items() if isinstance(b, list) and b and all(isinstance(x, dict) for x in b)}
+            lines += [f"{a} = {val(b)}" for a, b in v.items() if a not in subs]
+            for a, b in subs.items():
+                for t in b:
+                    lines.append(f"[[{k}.{a}]]")
+                    lines += [f"{x} = {val(y)}" for x, y in t.items()]
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            for t in v:
+                lines.append(f"[[{k}]]")
+                lines += [f"{x} = {val(y)}" for x, y in t.items()]
+    return "\n".join(lines) + "\n"
+
+
+def test_dda_blocks_command(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    import meshio
+
+    scene = tmp_path / "pit.toml"
+    scene.write_text(_toml(pit_scene()))
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "dda.cli", "blocks", str(scene), "-o", str(out), "--json"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert json.loads(r.stdout) == summary
+    ref = 100 * 80 * 40 - FRUSTUM
+    assert abs(summary["volume"] - ref) <= 1e-9 * ref
+    mesh = meshio.read(out / "blocks.vtu")
+    block = mesh.cell_data["block"][0]
+    assert block.max() + 1 == summary["blocks"]
+    assert (np.bincount(block) >= 4).all()  # every block has its faces' triangles
+    kinds = {summary["kinds"][k] for k in np.unique(mesh.cell_data["kind"][0])}
+    assert {"domain", "joint", "excavation", "fault"} <= kinds
+    bad = pit_scene(colour=3)
+    scene.write_text(_toml(bad))
+    r = subprocess.run([sys.executable, "-m", "dda.cli", "blocks", str(scene), "-o", str(tmp_path / "o2")],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "blocks.colour = 3" in r.stderr, r.stderr
+    assert not (tmp_path / "o2").exists()
