@@ -10,8 +10,8 @@ Stages, in order (each stage cuts the blocks the previous one left):
 
 1. the ``[domain]`` box;
 2. the persistent joint sets of ``[[blocks.joint_set]]`` (dip, dip direction, spacing, origin; a plane of a set
-   with ``persistence`` p < 1 cuts each block it crosses with chance p; with ``extent``, only blocks whose section
-   by the plane lies in the box);
+   with ``persistence`` p < 1 cuts each block it crosses with chance p; a set with ``extent`` cuts, after the
+   unbounded sets, the whole blocks whose section by the plane has its centre in the box);
 3. every ``[[excavation]]`` surface removes everything above it, exactly (dda/geoexcavate.py);
 4. every ``[[cavity]]`` removes everything inside it, exactly (dda/geoexcavate.py);
 5. every ``[[discontinuity]]`` disc and every fracture of the ``[dfn]`` network cuts, along its plane, each whole
@@ -185,7 +185,7 @@ def _cut_plane(pool, n, d, src, min_volume, stats, lo=None, hi=None, accept=None
 
 def _fabric(pool, spec, sources, lo, hi, stats):
     rng = np.random.default_rng(spec.seed)
-    for fs in spec.joint_sets:
+    for fs in sorted(spec.joint_sets, key=lambda fs: fs.extent is not None):  # bounded sets last
         n = dip_to_normal(fs.dip, fs.dip_direction)
         sources.append(Source(fs.name, JOINT, "plane", normal=n))
         src = len(sources) - 1
@@ -209,10 +209,9 @@ def _fabric(pool, spec, sources, lo, hi, stats):
 
 def _fabric_accept(fs, n, d, rng):
     def accept(b, s):
-        if fs.extent is not None:
-            pts = section(b, n, d, s)
-            eps = REL * b.diag()
-            if len(pts) == 0 or not (np.all(pts >= fs.extent[0] - eps) and np.all(pts <= fs.extent[1] + eps)):
+        if fs.extent is not None:  # a bounded set cuts the whole blocks whose section's centre lies in its box
+            c = section(b, n, d, s).mean(0)
+            if not (np.all(c >= fs.extent[0]) and np.all(c <= fs.extent[1])):
                 return False
         return fs.persistence >= 1.0 or rng.random() < fs.persistence
 

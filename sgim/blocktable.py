@@ -18,7 +18,7 @@ builder ignores the sphere keys ([packing], [bonds], [render], ...).
     spacing = 10.0                   # m, along the normal
     origin = [0.0, 0.0, 0.0]         # one plane of the set passes through it (default the domain's centre)
     persistence = 1.0                # chance that a plane cuts a block it crosses (0 < p <= 1)
-    extent = {min = [...], max = [...]}   # box where the set exists (default everywhere)
+    extent = {min = [...], max = [...]}   # a plane cuts the blocks whose section's centre is in it (default all)
 
 Standard library and numpy only (no numba): this module is read by every ``sgim build``.
 """

@@ -319,8 +319,8 @@ SGIM_KEYS = {
     "blocks.joint_set[].spacing": K("m", "distance between neighbouring planes, along the normal"),
     "blocks.joint_set[].origin": K("m", "a point one plane passes through", default="the domain's centre"),
     "blocks.joint_set[].persistence": K("-", "chance that a plane cuts a block it crosses (0 < p <= 1)"),
-    "blocks.joint_set[].extent": K("", "box where the set exists: a plane cuts a block only when the block's "
-                                       "section lies in it", absent="everywhere"),
+    "blocks.joint_set[].extent": K("", "box where the set exists: a plane cuts the whole blocks whose section's "
+                                       "centre lies in it (bounded sets cut after the others)", absent="everywhere"),
     "blocks.joint_set[].extent.min": K("m", "lower corner of the box"),
     "blocks.joint_set[].extent.max": K("m", "upper corner of the box; each coordinate > min"),
     "dfn": K("", "Monte-Carlo fracture network: seed and limit of the [[joint_set]] sampling, or a network file"),

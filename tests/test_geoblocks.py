@@ -283,3 +283,57 @@ def test_dda_blocks_command(tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "blocks.colour = 3" in r.stderr, r.stderr
     assert not (tmp_path / "o2").exists()
+
+
+def test_persistence_and_extent_of_fabric_sets():
+    base = {"domain": {"min": [0, 0, 0], "max": [40, 30, 20]}, "packing": {"kind": "cubic", "radius": 0.5}}
+    full = dict(base, blocks={"joint_set": [{"dip": 60, "dip_direction": 30, "spacing": 3},
+                                            {"dip": 20, "dip_direction": 200, "spacing": 4}]})
+    half = copy.deepcopy(full)
+    half["blocks"]["joint_set"][0]["persistence"] = 0.5
+    box = copy.deepcopy(full)
+    box["blocks"]["joint_set"][0]["extent"] = {"min": [5, 5, 0], "max": [30, 25, 20]}
+    mf, mh, mb = (build_blocks(scene_from_dict(d, "p.toml")) for d in (full, half, box))
+    for m in (mf, mh, mb):
+        assert abs(m.volumes().sum() - 24000) <= 1e-9 * 24000
+        block_check(m)
+    assert len(mb.blocks) < len(mf.blocks) and len(mh.blocks) < len(mf.blocks)
+    # the bounded set (cut last) made faces, each the section of a whole block with its centre in the box
+    src = [k for k, s in enumerate(mb.sources) if s.name == "B1"]
+    faces = [b.v[f] for b in mb.blocks for f, s in zip(b.faces, b.src) if s in src]
+    assert faces and all(((p.mean(0) >= [5, 5, 0]) & (p.mean(0) <= [30, 25, 20])).all() for p in faces)
+    far = [b for b in mf.blocks if (b.v.min(0)[:2] > [31, 26]).all() or (b.v.max(0)[:2] < [4, 4]).all()]
+    assert far and not any(s in src for b in mb.blocks if (b.v.min(0)[:2] > [31, 26]).all() for s in b.src)
+
+
+def test_triangulated_discontinuity_point_kinds():
+    tri_v = [[5, 5, 8], [30, 8, 12], [12, 26, 9], [34, 28, 14]]
+    data = {"domain": {"min": [0, 0, 0], "max": [40, 30, 20]}, "packing": {"kind": "cubic", "radius": 0.5},
+            "discontinuity": [{"name": "S", "vertices": tri_v, "faces": [[0, 1, 2], [1, 3, 2]]}],
+            "blocks": {"joint_set": [{"dip": 80, "dip_direction": 90, "spacing": 6}]}}
+    m = build_blocks(scene_from_dict(data, "s.toml"))
+    assert abs(m.volumes().sum() - 24000) <= 1e-9 * 24000
+    block_check(m)
+    v = np.array(tri_v, float)
+    tris = [v[[0, 1, 2]], v[[1, 3, 2]]]
+    rng = np.random.default_rng(2)
+    seen = set()
+    for i, b in enumerate(m.blocks):
+        for k, f in enumerate(b.faces):
+            if m.sources[b.src[k]].shape != "triangle":
+                continue
+            p = rng.dirichlet(np.ones(len(f)), size=30) @ b.v[f]
+            got = m.point_kinds(i, k, p)
+            # brute force: the point lies in (the plane of) one of the two triangles, by barycentric coordinates
+            want = np.full(len(p), INTACT)
+            for t in tris:
+                n = np.cross(t[1] - t[0], t[2] - t[0])
+                if not (np.abs((b.v[f] - t[0]) @ n) < 1e-6 * np.linalg.norm(n)).all():
+                    continue
+                m3 = np.column_stack([t[1] - t[0], t[2] - t[0], n])
+                lam = np.linalg.solve(m3, (p - t[0]).T).T
+                inside = (lam[:, 0] >= 0) & (lam[:, 1] >= 0) & (lam[:, 0] + lam[:, 1] <= 1)
+                want[inside] = KINDS.index("joint")
+            assert np.array_equal(got, want), (i, k)
+            seen |= set(got.tolist())
+    assert seen == {KINDS.index("joint"), INTACT}
