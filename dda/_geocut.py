@@ -284,3 +284,48 @@ def hull2d(p):
         out[k] = q[i]
         k += 1
     return out[:max(k - 1, 0)].copy()
+
+
+@njit(cache=True)
+def section_2d(v, edges, s, ox, oy, oz, e1, e2):
+    """The section points of a convex block by a plane (snapped signed distances s of its vertices; edges (m, 2))
+    in the plane's coordinates (e1, e2) about the origin o, as a convex counter-clockwise polygon."""
+    pts = np.empty((edges.shape[0] + v.shape[0], 2))
+    k = 0
+    for j in range(edges.shape[0]):
+        a, b = edges[j, 0], edges[j, 1]
+        if s[a] * s[b] < 0.0:
+            t = s[a] / (s[a] - s[b])
+            x = v[a, 0] + t * (v[b, 0] - v[a, 0]) - ox
+            y = v[a, 1] + t * (v[b, 1] - v[a, 1]) - oy
+            z = v[a, 2] + t * (v[b, 2] - v[a, 2]) - oz
+            pts[k, 0] = x * e1[0] + y * e1[1] + z * e1[2]
+            pts[k, 1] = x * e2[0] + y * e2[1] + z * e2[2]
+            k += 1
+    for i in range(v.shape[0]):
+        if s[i] == 0.0:
+            x, y, z = v[i, 0] - ox, v[i, 1] - oy, v[i, 2] - oz
+            pts[k, 0] = x * e1[0] + y * e1[1] + z * e1[2]
+            pts[k, 1] = x * e2[0] + y * e2[1] + z * e2[2]
+            k += 1
+    if k < 3:
+        return pts[:0].copy()
+    return hull2d(pts[:k].copy())
+
+
+@njit(cache=True)
+def origin_distance(poly):
+    """Distance from the origin to the convex counter-clockwise polygon poly (0 inside)."""
+    n = poly.shape[0]
+    inside = True
+    best = np.inf
+    for i in range(n):
+        a, b = poly[i], poly[(i + 1) % n]
+        ex, ey = b[0] - a[0], b[1] - a[1]
+        if ex * (-a[1]) - ey * (-a[0]) < 0.0:
+            inside = False
+        ee = ex * ex + ey * ey
+        t = 0.0 if ee == 0.0 else min(1.0, max(0.0, -(a[0] * ex + a[1] * ey) / ee))
+        dx, dy = a[0] + t * ex, a[1] + t * ey
+        best = min(best, math.sqrt(dx * dx + dy * dy))
+    return 0.0 if inside else best

@@ -22,7 +22,8 @@ import math
 
 import numpy as np
 
-from ._geocut import edges_csr, face_planes_csr, hull2d, overlap_mask, signed_snapped, split_csr, volume_centroid_csr
+from ._geocut import (edges_csr, face_planes_csr, hull2d, origin_distance, overlap_mask, section_2d, signed_snapped,
+                      split_csr, volume_centroid_csr)
 
 REL = 1e-9  # snapping tolerance, relative to a block's diagonal
 
@@ -175,19 +176,18 @@ def point_polygon_distance(poly, q):
     return float(np.sqrt(((a + t[:, None] * e - q) ** 2).sum(1)).min())
 
 
-def disc_reaches(b: TBlock, centre, n, radius):
+def disc_reaches(b: TBlock, centre, n, radius, basis=None, s=None):
     """True when the disc (centre, unit normal n, radius) meets the interior of block ``b``'s section by its
-    plane (the exact test: distance from the centre to the section polygon <= radius)."""
-    d = float(np.dot(n, centre))
-    pts = section(b, n, d)
-    if len(pts) < 3:
+    plane (the exact test: distance from the centre to the section polygon <= radius). ``basis``: the plane's
+    (e1, e2) when known; ``s``: the snapped signed distances when known."""
+    if s is None:
+        s = signed(b, n, float(np.dot(n, centre)))
+    if not ((s < 0).any() and (s > 0).any()):
         return False
-    e1, e2 = plane_basis(n)
-    rel = pts - centre
-    poly = convex_polygon_2d(np.column_stack([rel @ e1, rel @ e2]))
-    if len(poly) < 3:
-        return False
-    return point_polygon_distance(poly, np.zeros(2)) <= radius
+    e1, e2 = plane_basis(n) if basis is None else basis
+    c = np.asarray(centre, float)
+    poly = section_2d(b.v, b.edges(), s, c[0], c[1], c[2], e1, e2)
+    return len(poly) >= 3 and origin_distance(poly) <= radius
 
 
 def polygons_overlap(p, q, eps):

@@ -44,7 +44,8 @@ from sgim.common import atomic_path, atomic_vtu
 from sgim.dfn import network_for
 from sgim.geometry import dip_to_normal
 
-from .blockcut import REL, TBlock, disc_reaches, fan, face_planes, section, signed, split, triangle_reaches
+from .blockcut import (REL, TBlock, disc_reaches, fan, face_planes, plane_basis, section, signed, split,
+                       triangle_reaches)
 from .blockspec import BlockSpec
 from .geoexcavate import CavityCut, Terrain, carve_block, excavate_block
 
@@ -270,11 +271,12 @@ def _discs(pool, scene, spec, sources, stats):
         c, n = np.asarray(c, float), np.asarray(n, float)
         kind = FAULT if t > 0 else JOINT
         lo, hi = _disc_box(c, n, r, t)
+        basis = plane_basis(n)
         for off in ((-t / 2, t / 2) if t > 0 else (0.0,)):
             cc = c + off * n
             sources.append(Source(name, kind, "disc", centre=cc, normal=n, radius=r))
             repl = _cut_plane(pool, n, float(n @ cc), len(sources) - 1, spec.min_volume, stats, lo, hi,
-                              lambda b, s, cc=cc: disc_reaches(b, cc, n, r))
+                              lambda b, s, cc=cc: disc_reaches(b, cc, n, r, basis, s))
             stats["disc_cuts"] = stats.get("disc_cuts", 0) + len(repl)
         if t > 0:
             _fault_material(pool, c, n, r, t, name, lo, hi)

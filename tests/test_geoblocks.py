@@ -337,3 +337,38 @@ def test_triangulated_discontinuity_point_kinds():
             assert np.array_equal(got, want), (i, k)
             seen |= set(got.tolist())
     assert seen == {KINDS.index("joint"), INTACT}
+
+
+def test_disc_reach_against_a_constrained_minimisation():
+    """disc_reaches (section polygon, distance to the centre) against scipy's SLSQP: the nearest point to the
+    disc's centre in the block and on its plane (inside every face plane), reached when within the radius."""
+    from scipy.optimize import minimize
+
+    from dda.blockcut import TBlock, disc_reaches
+    from dda.shapes import random_rotation, shape
+
+    rng = np.random.default_rng(8)
+    agree = {True: 0, False: 0}
+    for trial in range(150):
+        spec = shape(["cube", "tetrahedron", "octahedron", "brick"][trial % 4], 2.0, rotation=random_rotation(rng))
+        b = TBlock(spec.vertices, spec.faces, np.zeros(len(spec.faces), np.int64))
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        c = rng.uniform(-1.2, 1.2, 3)
+        fn, fd = face_planes(b)
+        res = minimize(lambda x: ((x - c) ** 2).sum(), c, jac=lambda x: 2 * (x - c), method="SLSQP",
+                       constraints=[{"type": "ineq", "fun": lambda x: fd - fn @ x, "jac": lambda x: -fn},
+                                    {"type": "eq", "fun": lambda x: np.array([n @ (x - c)]),
+                                     "jac": lambda x: n[None, :]}], options={"ftol": 1e-14, "maxiter": 500})
+        sec_ok = res.success and (fn @ res.x - fd <= 1e-7).all()
+        if not sec_ok:  # the plane misses the block: no section, nothing reached
+            assert not disc_reaches(b, c, n, 10.0)
+            continue
+        dist = float(np.linalg.norm(res.x - c))
+        for r in (0.5 * dist, 2 * dist + 1e-3):
+            if abs(r - dist) < 1e-6:
+                continue
+            got = disc_reaches(b, c, n, r)
+            assert got == (dist <= r), (trial, r, dist)
+            agree[got] += 1
+    assert min(agree.values()) > 50, agree
