@@ -82,12 +82,6 @@ def fan(faces):
     return np.array(tri, dtype=np.int64).reshape(-1, 3), np.array(owner, dtype=np.int64)
 
 
-def volume_centroid(v, faces):
-    """Exact volume and centroid of a closed polyhedron with outward faces (fan tetrahedra)."""
-    b = TBlock(v, faces, np.zeros(len(faces), np.int64))
-    return b.volume_centroid()
-
-
 def face_planes(b: TBlock):
     """Outward unit normals (k, 3) and offsets (k,) of every face (Newell's method)."""
     return face_planes_csr(b.v, b.fptr, b.fidx)
@@ -96,17 +90,6 @@ def face_planes(b: TBlock):
 def signed(b: TBlock, n, d):
     """Signed distances of the vertices to the plane n . x = d (unit n), those within the tolerance set to 0."""
     return signed_snapped(b.v, float(n[0]), float(n[1]), float(n[2]), float(d), REL)
-
-
-def _cap_order(pts, n):
-    """Indices ordering points of a convex polygon counter-clockwise seen from the side n points to."""
-    c = pts.mean(0)
-    e1 = pts[np.argmax(np.linalg.norm(pts - c, axis=1))] - c
-    e1 -= n * (e1 @ n)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(n, e1)
-    d = pts - c
-    return np.argsort(np.arctan2(d @ e2, d @ e1), kind="stable")
 
 
 def split(b: TBlock, n, d, source, s=None):
@@ -120,15 +103,6 @@ def split(b: TBlock, n, d, source, s=None):
         return b, None
     r = split_csr(b.v, b.fptr, b.fidx, b.src, s, int(source), float(n[0]), float(n[1]), float(n[2]))
     return TBlock.from_csr(*r[:4], b.material), TBlock.from_csr(*r[4:], b.material)
-
-
-def clip_below(b: TBlock, n, d, source):
-    """The part of ``b`` with n . x <= d (None when nothing is left)."""
-    return split(b, n, d, source)[0]
-
-
-# ---------------------------------------------------------------------------------------------------------
-# sections and reach tests
 
 
 def plane_basis(n):
@@ -163,19 +137,6 @@ def convex_polygon_2d(p):
     return hull2d(p)
 
 
-def point_polygon_distance(poly, q):
-    """Distance from the 2D point q to the convex CCW polygon poly (0 inside)."""
-    a = poly
-    b = np.roll(poly, -1, axis=0)
-    e = b - a
-    w = q - a
-    cross = e[:, 0] * w[:, 1] - e[:, 1] * w[:, 0]
-    if (cross >= 0).all():
-        return 0.0
-    t = np.clip(np.einsum("ij,ij->i", w, e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300), 0.0, 1.0)
-    return float(np.sqrt(((a + t[:, None] * e - q) ** 2).sum(1)).min())
-
-
 def disc_reaches(b: TBlock, centre, n, radius, basis=None, s=None):
     """True when the disc (centre, unit normal n, radius) meets the interior of block ``b``'s section by its
     plane (the exact test: distance from the centre to the section polygon <= radius). ``basis``: the plane's
@@ -190,40 +151,27 @@ def disc_reaches(b: TBlock, centre, n, radius, basis=None, s=None):
     return len(poly) >= 3 and origin_distance(poly) <= radius
 
 
-def polygons_overlap(p, q, eps):
-    """True when two convex CCW 2D polygons overlap by more than ``eps`` along every separating axis."""
-    q = np.ascontiguousarray(q, dtype=np.float64)[None]
-    return bool(overlap_mask(np.ascontiguousarray(p, dtype=np.float64), q, np.zeros(1, np.int64), eps)[0])
-
-
-def triangle_reaches(b: TBlock, tri):
-    """True when the triangle ``tri`` (3, 3) meets block ``b`` with positive area in the triangle's plane."""
-    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
-    n /= np.linalg.norm(n)
-    pts = section(b, n, float(n @ tri[0]))
-    if len(pts) < 3:
+def triangle_reaches(b: TBlock, tri, n=None):
+    """True when the triangle ``tri`` (3, 3) meets block ``b`` with positive area in the triangle's plane (unit
+    normal ``n`` when known)."""
+    if n is None:
+        n = unit(np.cross(tri[1] - tri[0], tri[2] - tri[0]))
+    s = signed(b, n, float(n @ tri[0]))
+    if not ((s < 0).any() and (s > 0).any()):
         return False
     e1, e2 = plane_basis(n)
-    p = convex_polygon_2d(np.column_stack([pts @ e1, pts @ e2]))
-    t = convex_polygon_2d(np.column_stack([tri @ e1, tri @ e2]))
-    if len(p) < 3 or len(t) < 3:
+    o = tri[0]
+    p = section_2d(b.v, b.edges(), s, o[0], o[1], o[2], e1, e2)
+    if len(p) < 3:
         return False
-    return polygons_overlap(p, t, REL * b.diag())
-
-
-def inside_all(b: TBlock, pts, tol=0.0):
-    """Boolean per point: inside every face plane of ``b`` (within tol)."""
-    n, d = face_planes(b)
-    return (np.asarray(pts) @ n.T - d <= tol).all(1)
+    t = np.ascontiguousarray(np.column_stack([(tri - o) @ e1, (tri - o) @ e2]))
+    if (t[1, 0] - t[0, 0]) * (t[2, 1] - t[0, 1]) - (t[1, 1] - t[0, 1]) * (t[2, 0] - t[0, 0]) < 0:
+        t = t[::-1].copy()
+    return bool(overlap_mask(p, t[None], np.zeros(1, np.int64), REL * b.diag())[0])
 
 
 def euler_characteristic(b: TBlock):
     return len(b.v) - len(b.edges()) + len(b.faces)
-
-
-def angle_sorted(pts, n):
-    """``pts`` ordered counter-clockwise about ``n`` (a convex polygon's vertices)."""
-    return pts[_cap_order(pts, n)]
 
 
 def unit(v):

@@ -190,7 +190,7 @@ def carve_block(blk: TBlock, cav: CavityCut, wall_src, split_src):
         nxt = []
         for p in pieces:
             plo, phi = p.v.min(0), p.v.max(0)
-            if np.all(cav.lo[f] <= phi) and np.all(cav.hi[f] >= plo) and triangle_reaches(p, cav.tri[f]):
+            if np.all(cav.lo[f] <= phi) and np.all(cav.hi[f] >= plo) and triangle_reaches(p, cav.tri[f], cav.n[f]):
                 nxt += [q for q in split(p, cav.n[f], cav.d[f], split_src) if q is not None]
             else:
                 nxt.append(p)
