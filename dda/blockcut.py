@@ -151,15 +151,15 @@ def disc_reaches(b: TBlock, centre, n, radius, basis=None, s=None):
     return len(poly) >= 3 and origin_distance(poly) <= radius
 
 
-def triangle_reaches(b: TBlock, tri, n=None):
+def triangle_reaches(b: TBlock, tri, n=None, basis=None):
     """True when the triangle ``tri`` (3, 3) meets block ``b`` with positive area in the triangle's plane (unit
-    normal ``n`` when known)."""
+    normal ``n`` and its ``basis`` (e1, e2) when known)."""
     if n is None:
         n = unit(np.cross(tri[1] - tri[0], tri[2] - tri[0]))
     s = signed(b, n, float(n @ tri[0]))
     if not ((s < 0).any() and (s > 0).any()):
         return False
-    e1, e2 = plane_basis(n)
+    e1, e2 = plane_basis(n) if basis is None else basis
     o = tri[0]
     p = section_2d(b.v, b.edges(), s, o[0], o[1], o[2], e1, e2)
     if len(p) < 3:

@@ -175,6 +175,10 @@ class CavityCut:
         self.n = nrm / ln[:, None]
         self.d = np.einsum("ij,ij->i", self.n, self.tri[:, 0])
         self.lo, self.hi = self.tri.min(1), self.tri.max(1)
+        h = np.where((np.abs(self.n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        self.e1 = np.cross(h, self.n)
+        self.e1 /= np.linalg.norm(self.e1, axis=1)[:, None]
+        self.e2 = np.cross(self.n, self.e1)  # (e1, e2, n) right-handed, as blockcut.plane_basis
 
     def facets_near(self, lo, hi):
         return np.nonzero(np.all(self.lo <= hi, axis=1) & np.all(self.hi >= lo, axis=1))[0]
@@ -185,16 +189,22 @@ def carve_block(blk: TBlock, cav: CavityCut, wall_src, split_src):
     lo, hi = blk.v.min(0), blk.v.max(0)
     if np.any(hi < cav.mesh.lo) or np.any(lo > cav.mesh.hi):
         return [blk]
-    pieces = [blk]
+    pieces, plo, phi = [blk], [lo], [hi]
     for f in cav.facets_near(lo, hi):
-        nxt = []
-        for p in pieces:
-            plo, phi = p.v.min(0), p.v.max(0)
-            if np.all(cav.lo[f] <= phi) and np.all(cav.hi[f] >= plo) and triangle_reaches(p, cav.tri[f], cav.n[f]):
-                nxt += [q for q in split(p, cav.n[f], cav.d[f], split_src) if q is not None]
-            else:
-                nxt.append(p)
-        pieces = nxt
+        near = np.all(cav.lo[f] <= np.array(phi), axis=1) & np.all(cav.hi[f] >= np.array(plo), axis=1)
+        for k in np.nonzero(near)[0].tolist():
+            p = pieces[k]
+            if not triangle_reaches(p, cav.tri[f], cav.n[f], (cav.e1[f], cav.e2[f])):
+                continue
+            below, above = split(p, cav.n[f], cav.d[f], split_src)
+            pieces[k] = None
+            for q in (below, above):
+                if q is not None:
+                    pieces.append(q)
+                    plo.append(q.v.min(0))
+                    phi.append(q.v.max(0))
+        keep = [k for k, p in enumerate(pieces) if p is not None]
+        pieces, plo, phi = [pieces[k] for k in keep], [plo[k] for k in keep], [phi[k] for k in keep]
     cents = np.array([p.volume_centroid()[1] for p in pieces])
     inside = np.asarray(cav.mesh.inside(cents), bool)
     if not inside.any():
