@@ -11,6 +11,7 @@ By role:
 - adapters/liggghts_deck.py: the deck (atom types, load groups, the box, the variants bonds / sjkr / clumps,
   what LIGGGHTS-PUBLIC cannot do exactly);
 - adapters/liggghts_joints.py: spheres.liggghts_joints = "open" (no contact across a joint);
+- adapters/liggghts_walls.py: run.extra liggghts_joint_walls (the fixed side of a joint as a mesh wall);
 - adapters/liggghts_run.py: the runner (bond breakage between chunks, results) and the deck read back;
 - adapters/_liggghts_io.py: the data file, the dump reader and the engine driver.
 

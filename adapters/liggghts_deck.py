@@ -86,6 +86,7 @@ import numpy as np
 
 from ._liggghts_io import DUMP_COLUMNS, write_data
 from .liggghts_joints import joint_exclusions, open_joint_notes, open_joint_problem, open_joints
+from . import liggghts_walls as jw
 from .spec import SpecError, SphereRun
 
 VARIANTS = ("bonds", "sjkr", "clumps")
@@ -199,11 +200,12 @@ def _matrix(values):
     return " ".join(f"{v:.17g}" for v in np.asarray(values, float).ravel())
 
 
-def _type_pairs():
-    """(colour_a, colour_b, fixed_a, fixed_b) of the N_TYPES x N_TYPES matrix, row-major."""
-    t = np.arange(N_TYPES)
+def _type_pairs(n_types=N_TYPES):
+    """(colour_a, colour_b, fixed_a, fixed_b) of the n_types x n_types matrix, row-major (types beyond N_TYPES,
+    the joint walls' (adapters/liggghts_walls.py), count as fixed)."""
+    t = np.arange(n_types)
     a, b = np.meshgrid(t, t, indexing="ij")
-    return a % 4, b % 4, a >= 4, b >= 4
+    return np.where(a < N_TYPES, a % 4, -1), np.where(b < N_TYPES, b % 4, -1), a >= 4, b >= 4
 
 
 def cohesion_matrix():
@@ -309,9 +311,13 @@ def approximations(run: SphereRun, variant):
     if variant == "bonds" and bond_gap(run) > 0:
         out.append(f"contact radius r (1 - {bond_gap(run):g}) (masses kept): bonded pairs get the granular "
                    f"contact only beyond a compressive strain of about {2 * bond_gap(run):g}")
+    out += jw.wall_notes(run)
+    if jw.joint_walls(run) and variant == "bonds" and run.n_bonds:
+        out.append("liggghts_joint_walls with central bonds: a bonded sphere turns freely, so it rolls on a wall like "
+                   "a ball bearing and the wall's friction barely holds a bonded block (the clumps variant holds it)")
     if open_joints(run):
         out += open_joint_notes(run)
-    elif len(run.joint_i) and run.smooth_joints:
+    elif len(run.joint_i) and run.smooth_joints and not jw.all_walled(run):
         out.append("spheres.smooth_joints not represented (LIGGGHTS-PUBLIC has no smooth joint): joint pairs are "
                    "plain contacts along the centre line (joint friction on green-blue type pairs); "
                    "spheres.liggghts_joints = \"open\" drops their contact instead")
@@ -394,7 +400,15 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
         mol, fixed, n_bodies = clump_molecules(run)
     pres, _, vgroups, fgroups = load_groups(run, variant)
     types = atom_types(run, fixed | pres)  # prescribed spheres: typed as fixed (not integrated)
+    planes = jw.wall_planes(run)  # run.extra liggghts_joint_walls: rigid-side joints as mesh walls
+    types[jw.dropped(run, planes)] = jw.DROPPED_TYPE
+    n_types = jw.WALL_TYPES if planes else N_TYPES
     box = deck_box(run)
+    if planes:  # the box holds the walls
+        corners = jw.wall_triangles(run, planes).reshape(-1, 3)
+        box = (np.minimum(box[0], corners.min(0) - r_mean), np.maximum(box[1], corners.max(0) + r_mean))
+        for k, (p, tri) in enumerate(zip(planes, jw.wall_triangles(run, planes)), 1):
+            jw.write_stl(folder / f"wall_{k}.stl", tri, p["normal"], f"joint{p['disc']}")
     bonds = None
     if variant == "bonds":
         bonds = (run.bond_i, run.bond_j, 0.5 * np.asarray(run.bond_kn, float), run.bond_len0)
@@ -405,11 +419,19 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     elif variant == "bonds" and bond_gap(run) > 0:  # bonded pairs keep clear of the granular contact
         radii = run.radii * (1.0 - bond_gap(run))
         density = run.density * (run.radii / radii) ** 3
-    write_data(folder / "data", run.centers, radii, density, types, mol, N_TYPES, box, bonds=bonds,
+    if planes and run.extra.get("liggghts_wall_radii"):  # every sphere of a walled joint pair touches the wall
+        if variant != "clumps":
+            raise SpecError(f"{run.source or run.name}: run.extra liggghts_wall_radii grows the radii of the spheres "
+                            f"on the walls, which needs the clumps variant (no contacts inside a body), not {variant}")
+        radii = jw.wall_radii(run, planes)
+        density = run.density * (run.radii / radii) ** 3
+    write_data(folder / "data", run.centers, radii, density, types, mol, n_types, box, bonds=bonds,
                title=f"{run.name} ({variant})")
 
-    ca, cb, fa, fb = _type_pairs()
+    ca, cb, fa, fb = _type_pairs(n_types)
     joint = ((ca == 2) & (cb == 3)) | ((ca == 3) & (cb == 2))
+    t = np.arange(1, n_types + 1)
+    joint |= (t[:, None] == jw.WALL_TYPE) | (t[None, :] == jw.WALL_TYPE)  # a wall is the joint's fixed side
     mu = np.where(joint & run.smooth_joints, math.tan(math.radians(run.joint_friction_deg)),
                   math.tan(math.radians(run.friction_deg)))
     meff = np.where(fa | fb, m_mean, 0.5 * m_mean)
@@ -432,32 +454,35 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
         raise SpecError(f"{run.source or run.name}: spheres.liggghts_joints = open: {open_joint_problem(run)}")
     for a, b in joint_exclusions(run):  # spheres.liggghts_joints = "open": no contact across a joint
         L.append(f"neigh_modify exclude type {a} {b}")
+    for a, b in jw.exclusions() if planes else []:  # the fixed spheres the walls stand for: no contact
+        L.append(f"neigh_modify exclude type {a} {b}")
     if variant == "clumps" and n_bodies:
         L.append(f"group clump molecule 1:{n_bodies}")
         L.append("neigh_modify exclude molecule clump")
     fx = "fix"
     if variant == "sjkr":
         young, coh, e_rest = sjkr_parameters(run)
-        L += [f"{fx} m1 all property/global youngsModulus peratomtype {_matrix(np.full(N_TYPES, young))}",
-              f"{fx} m2 all property/global poissonsRatio peratomtype {_matrix(np.full(N_TYPES, SJKR_NU))}",
-              f"{fx} m3 all property/global coefficientRestitution peratomtypepair {N_TYPES} "
-              f"{_matrix(np.full((N_TYPES, N_TYPES), e_rest))}",
-              f"{fx} m4 all property/global coefficientFriction peratomtypepair {N_TYPES} {_matrix(mu)}",
-              f"{fx} m5 all property/global cohesionEnergyDensity peratomtypepair {N_TYPES} "
-              f"{_matrix(np.where(cohesion_matrix(), coh, 0.0))}",
+        L += [f"{fx} m1 all property/global youngsModulus peratomtype {_matrix(np.full(n_types, young))}",
+              f"{fx} m2 all property/global poissonsRatio peratomtype {_matrix(np.full(n_types, SJKR_NU))}",
+              f"{fx} m3 all property/global coefficientRestitution peratomtypepair {n_types} "
+              f"{_matrix(np.full((n_types, n_types), e_rest))}",
+              f"{fx} m4 all property/global coefficientFriction peratomtypepair {n_types} {_matrix(mu)}",
+              f"{fx} m5 all property/global cohesionEnergyDensity peratomtypepair {n_types} "
+              f"{_matrix(np.pad(np.where(cohesion_matrix(), coh, 0.0), (0, n_types - N_TYPES)))}",
               "pair_style gran model hertz tangential history cohesion sjkr"]
     else:
-        L += [f"{fx} m1 all property/global kn peratomtypepair {N_TYPES} "
-              f"{_matrix(np.full((N_TYPES, N_TYPES), run.kn))}",
-              f"{fx} m2 all property/global kt peratomtypepair {N_TYPES} "
-              f"{_matrix(np.full((N_TYPES, N_TYPES), run.ks))}",
-              f"{fx} m3 all property/global gamman_abs peratomtypepair {N_TYPES} {_matrix(gamma_n)}",
-              f"{fx} m4 all property/global gammat_abs peratomtypepair {N_TYPES} "
-              f"{_matrix(np.zeros((N_TYPES, N_TYPES)))}",
-              f"{fx} m5 all property/global coefficientFriction peratomtypepair {N_TYPES} {_matrix(mu)}",
+        L += [f"{fx} m1 all property/global kn peratomtypepair {n_types} "
+              f"{_matrix(np.full((n_types, n_types), run.kn))}",
+              f"{fx} m2 all property/global kt peratomtypepair {n_types} "
+              f"{_matrix(np.full((n_types, n_types), run.ks))}",
+              f"{fx} m3 all property/global gamman_abs peratomtypepair {n_types} {_matrix(gamma_n)}",
+              f"{fx} m4 all property/global gammat_abs peratomtypepair {n_types} "
+              f"{_matrix(np.zeros((n_types, n_types)))}",
+              f"{fx} m5 all property/global coefficientFriction peratomtypepair {n_types} {_matrix(mu)}",
               "pair_style gran model hooke/stiffness tangential history absolute_damping on "
               "tangential_damping off limitForce on"]
-    L += ["pair_coeff * *", "group fixed type 5 6 7 8", "velocity fixed set 0 0 0"]
+    L += ["pair_coeff * *", "group fixed type 5 6 7 8" + (f" {jw.DROPPED_TYPE}" if planes else ""),
+          "velocity fixed set 0 0 0"]
     for k, (v, idx) in enumerate(vgroups, 1):  # prescribed velocities: x = x0 + v t, whatever the forces
         L += _id_lines(f"pv{k}", idx)
         L += [f"velocity pv{k} set {_matrix(v)}", f"fix mv{k} pv{k} move linear {_matrix(v)}"]
@@ -471,6 +496,11 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     if gnorm > 0:
         L.append(f"fix grav all gravity {gnorm:.17g} vector {g[0] / gnorm:.17g} {g[1] / gnorm:.17g} "
                  f"{g[2] / gnorm:.17g}")
+    if planes:  # the fixed sides of the joints as mesh walls, on every sphere that moves
+        L += ["group onwall subtract all fixed"]
+        L += jw.wall_commands(planes, "onwall", "hertz tangential history" if variant == "sjkr" else
+                              "hooke/stiffness tangential history", "" if variant == "sjkr" else
+                              "absolute_damping on tangential_damping off limitForce on")
     L.append("fix integrate single nve/sphere")
     if variant == "clumps" and n_bodies:
         L.append("fix bodies clump rigid molecule")
@@ -484,7 +514,7 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
           '  "dump_modify rec sort id" &',
           f'  "run {run.steps}"']
     (folder / "in").write_text("\n".join(L) + "\n")
-    return {"variant": variant, "atom_types": N_TYPES, "bond_types": int(run.n_bonds) if variant == "bonds" else 0,
+    return {"variant": variant, "atom_types": n_types, "joint_walls": len(planes), "bond_types": int(run.n_bonds) if variant == "bonds" else 0,
             "rigid_bodies": int(n_bodies), "box": [list(map(float, box[0])), list(map(float, box[1]))],
             "check_steps": check_steps(run), "approximations": approximations(run, variant),
             "liggghts_joints": run.liggghts_joints if open_joints(run) else "contact",
