@@ -312,9 +312,10 @@ def approximations(run: SphereRun, variant):
         out.append(f"contact radius r (1 - {bond_gap(run):g}) (masses kept): bonded pairs get the granular "
                    f"contact only beyond a compressive strain of about {2 * bond_gap(run):g}")
     out += jw.wall_notes(run)
-    if jw.joint_walls(run) and variant == "bonds" and run.n_bonds:
-        out.append("liggghts_joint_walls with central bonds: a bonded sphere turns freely, so it rolls on a wall like "
-                   "a ball bearing and the wall's friction barely holds a bonded block (the clumps variant holds it)")
+    if jw.joint_walls(run) and variant != "clumps":
+        out.append(f"liggghts_joint_walls with the {variant} variant: a sphere turns freely (central bonds, adhesion), "
+                   "so it rolls on a wall like a ball bearing and the wall's friction barely holds a block of spheres "
+                   "(the clumps variant makes it one rigid body)")
     if open_joints(run):
         out += open_joint_notes(run)
     elif len(run.joint_i) and run.smooth_joints and not jw.all_walled(run):
@@ -419,7 +420,7 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     elif variant == "bonds" and bond_gap(run) > 0:  # bonded pairs keep clear of the granular contact
         radii = run.radii * (1.0 - bond_gap(run))
         density = run.density * (run.radii / radii) ** 3
-    if planes and run.extra.get("liggghts_wall_radii"):  # every sphere of a walled joint pair touches the wall
+    if planes and jw.flag(run, "liggghts_wall_radii"):  # every sphere of a walled joint pair touches the wall
         if variant != "clumps":
             raise SpecError(f"{run.source or run.name}: run.extra liggghts_wall_radii grows the radii of the spheres "
                             f"on the walls, which needs the clumps variant (no contacts inside a body), not {variant}")
@@ -514,7 +515,8 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
           '  "dump_modify rec sort id" &',
           f'  "run {run.steps}"']
     (folder / "in").write_text("\n".join(L) + "\n")
-    return {"variant": variant, "atom_types": n_types, "joint_walls": len(planes), "bond_types": int(run.n_bonds) if variant == "bonds" else 0,
+    return {"variant": variant, "atom_types": n_types, "joint_walls": len(planes),
+            "bond_types": int(run.n_bonds) if variant == "bonds" else 0,
             "rigid_bodies": int(n_bodies), "box": [list(map(float, box[0])), list(map(float, box[1]))],
             "check_steps": check_steps(run), "approximations": approximations(run, variant),
             "liggghts_joints": run.liggghts_joints if open_joints(run) else "contact",

@@ -28,14 +28,24 @@ from __future__ import annotations
 
 import numpy as np
 
+from .spec import SpecError
+
 DROPPED_TYPE, WALL_TYPE = 9, 10  # after the 8 sphere types of adapters/liggghts_deck.py (colour x fixed)
 WALL_TYPES = 10
+
+
+def flag(run, key):
+    """run.extra[key] as a bool (absent: False); SpecError naming the key and value unless true or false."""
+    value = run.extra.get(key, False)
+    if value is True or value is False or (isinstance(value, int) and value in (0, 1)):
+        return bool(value)
+    raise SpecError(f"{run.source or run.name}: run.extra {key} = {value!r}: expected true or false")
 
 
 def joint_walls(run):
     """True when the deck writes the rigid sides of joints as mesh walls (run.extra ``liggghts_joint_walls``)
     and some joint pair joins a fixed and a free sphere."""
-    if not bool(run.extra.get("liggghts_joint_walls", False)) or not len(run.joint_i):
+    if not flag(run, "liggghts_joint_walls") or not len(run.joint_i):
         return False
     fixed = np.asarray(run.fixed, bool)
     return bool(np.any(fixed[run.joint_i] != fixed[run.joint_j]))
@@ -111,7 +121,7 @@ def wall_radii(run, planes=None):
     points cannot slide without turning, so it slid at 0.66 % above Hoek & Bray's angle)."""
     planes = wall_planes(run) if planes is None else planes
     r = np.asarray(run.radii, float).copy()
-    if not planes or not bool(run.extra.get("liggghts_wall_radii", False)):
+    if not planes or not flag(run, "liggghts_wall_radii"):
         return r
     fixed = np.asarray(run.fixed, bool)
     i, j = np.asarray(run.joint_i), np.asarray(run.joint_j)
@@ -173,10 +183,10 @@ def wall_notes(run, planes=None):
             "walls take part in no contact. The wall is a flat surface where the smooth joint is a plane between "
             "sphere pairs: " + ("every free sphere of those pairs touches it (liggghts_wall_radii: contact radius "
                                 "= its centre's distance to the nearest wall, masses kept)"
-                                if run.extra.get("liggghts_wall_radii") else
+                                if flag(run, "liggghts_wall_radii") else
                                 "the free side rests on its lowest spheres (those nearest the plane), not on every "
                                 "joint pair")]
 
 
-__all__ = ["DROPPED_TYPE", "WALL_TYPE", "WALL_TYPES", "joint_walls", "wall_planes", "dropped", "wall_triangles",
+__all__ = ["flag", "DROPPED_TYPE", "WALL_TYPE", "WALL_TYPES", "joint_walls", "wall_planes", "dropped", "wall_triangles",
            "write_stl", "wall_commands", "all_walled", "wall_radii", "exclusions", "wall_notes"]

@@ -4,8 +4,8 @@ The deck is read back and checked against the definition by brute force (each wa
 the joint's orientation from its dip and dip direction, touching the nearest free sphere of the joint's pairs;
 the fixed spheres behind it typed out of every contact; the grown contact radii of liggghts_wall_radii). Real
 LIGGGHTS runs (CI=true: no skip): a rigid block on an inclined wall slides as s = 1/2 g (sin a - tan phi cos a)
-t^2 and holds when phi > a; the sphere wedge of `cases crossval` slides at 0.995 x Hoek & Bray's critical
-friction and holds at 1.005 x.
+t^2 and holds when phi > a (bonded by central bonds instead of a clump it rolls: 5/7 g sin a); the sphere wedge
+of `cases crossval` slides at 0.995 x Hoek & Bray's critical friction and holds at 1.005 x.
 """
 from __future__ import annotations
 
@@ -13,10 +13,12 @@ import math
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from adapters import liggghts_walls as jw
 from adapters.deck import export
 from adapters.deck import run as run_deck
+from adapters.spec import SpecError
 from cases.lib import crossval as cv
 from engine_runs import hand_run, require_engine
 
@@ -81,7 +83,8 @@ def test_wedge_walls_are_the_joint_planes_touching_the_nearest_free_sphere(tmp_p
 
 def _block_on_incline(alpha, phi, duration=0.4):
     """A bonded 3 x 3 block of spheres (r = 0.05) on a fixed 14 x 3 layer, joint pairs straight down (normal
-    +z), gravity tilted by `alpha` about y (the incline), joint friction `phi`, records every T / 8; joint walls, clumps variant."""
+    +z), gravity tilted by `alpha` about y (the incline), joint friction `phi`, records every T / 8; joint
+    walls."""
     r = 0.05
     xs, ys = np.meshgrid(np.arange(14) * 2 * r - 2 * r, np.arange(3) * 2 * r, indexing="ij")
     rock = np.c_[xs.ravel(), ys.ravel(), np.full(xs.size, -r)]
@@ -138,3 +141,30 @@ def test_wedge_on_walls_slides_below_and_holds_above_hoek_bray(tmp_path):
     assert slides, s
     holds, s = cv.wedge_trial("liggghts", base, 1.005 * phi_c, tmp_path)
     assert not holds, s
+
+
+def test_bonded_spheres_roll_on_a_wall_as_ball_bearings(tmp_path):
+    # why the wedge runs as a clump: harmonic bonds are central, so each sphere of a bonded block on a wall turns
+    # freely and rolls (friction 20 deg > atan(2/7 tan 30 deg), enough to roll): the block accelerates at
+    # 5/7 g sin a (translation plus each sphere's spin), not at g (sin a - tan phi cos a)
+    require_engine("liggghts")
+    run = _block_on_incline(30.0, 20.0, 0.2)
+    run.save(tmp_path / "run.npz")
+    export(tmp_path / "run.npz", "liggghts", tmp_path / "deck", variant="bonds", force=True)
+    res = run_deck(tmp_path / "deck", out=tmp_path / "deck" / "result")
+    assert any("rolls on a wall" in a for a in res.extra["approximations"])
+    k = np.flatnonzero(res.time >= 0.05 - 1e-9)
+    acc = 2.0 * np.polyfit(res.time[k], [float(np.mean(res.pos[q][~run.fixed, 0])) for q in k], 2)[0]
+    assert abs(acc / (5.0 / 7.0 * G * 0.5) - 1.0) < 1e-3, acc
+
+
+def test_bad_wall_options_are_refused_in_one_line(tmp_path):
+    run = _block_on_incline(30.0, 20.0)
+    run.extra["liggghts_joint_walls"] = "yes"
+    run.save(tmp_path / "a.npz")
+    with pytest.raises(SpecError, match=r"run.extra liggghts_joint_walls = 'yes': expected true or false"):
+        export(tmp_path / "a.npz", "liggghts", tmp_path / "a", force=True)
+    run.extra.update(liggghts_joint_walls=True, liggghts_wall_radii=True)
+    run.save(tmp_path / "b.npz")
+    with pytest.raises(SpecError, match="liggghts_wall_radii .* needs the clumps variant"):
+        export(tmp_path / "b.npz", "liggghts", tmp_path / "b", variant="bonds", force=True)

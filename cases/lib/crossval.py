@@ -149,7 +149,8 @@ def run_engine(engine, source, work, timeout=None, run=None, variant=None):
 
         return run_inhouse(run if run is not None else from_scene(source))
     deck = Path(work) / engine
-    export(source, engine, deck, variant=variant, force=True)  # a deck of an earlier run (--keep): replaced, nothing else is
+    # a deck of an earlier run (--keep): replaced, nothing else is
+    export(source, engine, deck, variant=variant, force=True)
     return run_deck(deck, out=deck / "result", timeout=timeout)
 
 
