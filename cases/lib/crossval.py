@@ -18,7 +18,8 @@ and compares it with a reference computed here, independently of every engine:
   the joint friction; a trial slides when the wedge has not come to rest: its displacement along the line of
   intersection grew in the last quarter of the run; the free spheres that fewer than three bonds hold are left
   out, they swing for ever). Reference: Hoek & Bray's critical friction (dda.hoekbray); the DDA block wedge
-  (dda.wedge) is a row. `python -m cases.bench.wedge` gives the error and cost against the sphere radius.
+  (dda.wedge) is a row. LIGGGHTS-PUBLIC, which has no smooth joint, runs the wedge on mesh walls in place of the
+  fixed rock, as one rigid clump, with fix viscous (liggghts_wedge, adapters/liggghts_walls.py). `python -m cases.bench.wedge` gives the error and cost against the sphere radius.
 - rocking: a block cut by a horizontal smooth joint rocks under a sideways push at its top; the heel of the
   joint opens in the first swing and closes again, local damping brings it to rest. In-house and YADE only (no
   smooth joint in LIGGGHTS-PUBLIC), each against the other: the upper part's mean vertical displacement at the
