@@ -32,6 +32,7 @@ from .spec import SpecError
 
 DROPPED_TYPE, WALL_TYPE = 9, 10  # after the 8 sphere types of adapters/liggghts_deck.py (colour x fixed)
 WALL_TYPES = 10
+PLANAR_DEG = 1e-3  # a walled joint's pair normals may differ from their mean by this much [deg]
 
 
 def flag(run, key):
@@ -60,26 +61,35 @@ def _basis(n):
 
 
 def wall_planes(run):
-    """One dict per walled joint: disc (joint_disc), normal (3,) from the fixed to the free side, offset d
+    """One dict per walled joint side: disc (joint_disc), normal (3,) from the fixed to the free side, offset d
     (the plane n.x = d), back (the largest n.c of the pairs' fixed spheres: the fixed spheres with n.c <= back
-    are the rock the wall stands for), pairs (number of fixed-free joint pairs). [] when the deck has no
-    walls."""
+    are the rock the wall stands for), pairs (number of fixed-free joint pairs). A joint with fixed rock on both
+    of its sides in places gets a wall for each side. [] when the deck has no walls; SpecError for a joint that
+    is not planar (its pairs' normals differ by more than PLANAR_DEG: a wall is one plane)."""
     if not joint_walls(run):
         return []
     fixed = np.asarray(run.fixed, bool)
     c, r = np.asarray(run.centers, float), np.asarray(run.radii, float)
     i, j = np.asarray(run.joint_i), np.asarray(run.joint_j)
     mixed = fixed[i] != fixed[j]
+    normal = np.asarray(run.joint_normal, float).reshape(-1, 3) * np.where(fixed[i], 1.0, -1.0)[:, None]  # -> free
     out = []
     for disc in np.unique(np.asarray(run.joint_disc)[mixed]):
-        k = np.flatnonzero(mixed & (np.asarray(run.joint_disc) == disc))
-        free = np.where(fixed[i[k]], j[k], i[k])
-        sign = np.where(fixed[i[k]], 1.0, -1.0)  # joint_normal points from i to j
-        n = np.sum(np.asarray(run.joint_normal, float).reshape(-1, 3)[k] * sign[:, None], axis=0)
-        n /= np.linalg.norm(n)
-        rock = np.where(fixed[i[k]], i[k], j[k])
-        out.append(dict(disc=int(disc), normal=n, offset=float(np.min(c[free] @ n - r[free])),
-                        back=float(np.max(c[rock] @ n)), pairs=int(len(k))))
+        on = np.flatnonzero(mixed & (np.asarray(run.joint_disc) == disc))
+        side = normal[on] @ normal[on[0]] >= 0.0
+        for k in (on[side], on[~side]):
+            if not len(k):
+                continue
+            n = np.sum(normal[k], axis=0)
+            n /= np.linalg.norm(n)
+            spread = float(np.degrees(np.arccos(np.clip(np.min(normal[k] @ n), -1.0, 1.0))))
+            if spread > PLANAR_DEG:
+                raise SpecError(f"{run.source or run.name}: run.extra liggghts_joint_walls: joint {int(disc)} is not "
+                                f"planar (its pairs' normals differ by up to {spread:.3g} deg from their mean): a "
+                                "wall is one plane")
+            free, rock = np.where(fixed[i[k]], j[k], i[k]), np.where(fixed[i[k]], i[k], j[k])
+            out.append(dict(disc=int(disc), normal=n, offset=float(np.min(c[free] @ n - r[free])),
+                            back=float(np.max(c[rock] @ n)), pairs=int(len(k))))
     return out
 
 
@@ -188,5 +198,5 @@ def wall_notes(run, planes=None):
                                 "joint pair")]
 
 
-__all__ = ["flag", "DROPPED_TYPE", "WALL_TYPE", "WALL_TYPES", "joint_walls", "wall_planes", "dropped", "wall_triangles",
+__all__ = ["flag", "PLANAR_DEG", "DROPPED_TYPE", "WALL_TYPE", "WALL_TYPES", "joint_walls", "wall_planes", "dropped", "wall_triangles",
            "write_stl", "wall_commands", "all_walled", "wall_radii", "exclusions", "wall_notes"]

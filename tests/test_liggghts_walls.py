@@ -168,3 +168,32 @@ def test_bad_wall_options_are_refused_in_one_line(tmp_path):
     run.save(tmp_path / "b.npz")
     with pytest.raises(SpecError, match="liggghts_wall_radii .* needs the clumps variant"):
         export(tmp_path / "b.npz", "liggghts", tmp_path / "b", variant="bonds", force=True)
+
+
+def test_a_joint_with_rock_on_both_sides_gets_a_wall_for_each_side():
+    # a fixed layer at z = -r between a block above (z = r) and one below (z = -3 r): two walls, normals +z and
+    # -z, each touching its block's spheres (z = 0 and z = -2 r); the fixed layer is the rock of both
+    run = _block_on_incline(0.0, 20.0)
+    m, r = int(run.fixed.sum()), 0.05
+    below = run.centers[m:] - [0.0, 0.0, 4 * r]
+    c = np.r_[run.centers, below]
+    nb = len(below)
+    sub = hand_run(c, r, fixed=range(m), liggghts_joint_walls=True)
+    rock = np.r_[run.joint_i, run.joint_i]
+    run = replace(sub, joint_i=rock, joint_j=np.r_[run.joint_j, np.arange(len(run.centers), len(c))],
+                  joint_disc=np.zeros(18, np.int32), joint_normal=np.r_[np.tile([0.0, 0.0, 1.0], (nb, 1)),
+                                                                        np.tile([0.0, 0.0, -1.0], (nb, 1))])
+    planes = jw.wall_planes(run)
+    assert len(planes) == 2
+    got = sorted((float(p["normal"][2]), p["offset"]) for p in planes)
+    assert np.allclose([g[0] for g in got], [-1.0, 1.0], atol=1e-15)
+    assert np.allclose([g[1] for g in got], [2 * r, 0.0], atol=1e-15)  # -z = 2 r: the plane z = -2 r
+    assert np.array_equal(jw.dropped(run), run.fixed)
+
+
+def test_a_curved_joint_is_refused():
+    run = _block_on_incline(30.0, 20.0)
+    n = run.joint_normal.copy()
+    n[0] = [math.sin(math.radians(1.0)), 0.0, math.cos(math.radians(1.0))]  # one pair's normal 1 deg off
+    with pytest.raises(SpecError, match="joint 0 is not planar"):
+        jw.wall_planes(replace(run, joint_normal=n))
