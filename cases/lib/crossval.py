@@ -401,7 +401,8 @@ def liggghts_wedge(run):
     No local damping in LIGGGHTS: fix viscous gamma = m / WEDGE_LIGGGHTS_TAU per sphere takes out the settling
     onto the walls (the wedge first rests on its lowest sphere on each wall and turns by 0.6 deg) and the
     contact vibrations; below phi_c the wedge then creeps at a tau (a its acceleration), 0.13 delta m in the last
-    quarter at tan phi = (1 - delta) tan phi_c, so a trial slides from delta = 4e-4 (WEDGE_REST)."""
+    quarter at tan phi = (1 - delta) tan phi_c, so a trial slides from delta = 4e-4 (WEDGE_REST). Measured: the
+    onset's bracket 19.692-19.707 deg at tau = 0.05, 0.1 and 0.2 s; undamped +0.51 %."""
     m = run.density * 4.0 / 3.0 * math.pi * float(np.mean(np.asarray(run.radii) ** 3))
     return replace(run, extra={**run.extra, "liggghts_joint_walls": True, "liggghts_wall_radii": True,
                                "liggghts_viscous": m / WEDGE_LIGGGHTS_TAU})
