@@ -8,10 +8,10 @@
 - an sgim ``model.npz``: run with default settings;
 - a ``run.npz`` (a deck's SphereRun): as it is.
 
-``overrides`` (duration, dt, record_every, viscous_damping, liggghts_joints) shorten or change the run. ``to`` is
-a target of adapters/registry.py (yade, liggghts, pfc-text, vtu; a block scene: yade, the YADE Polyhedra deck):
-the target's writer writes the deck, what the target cannot take (a variant, an option, a run.npz without a
-model) is refused first in one line naming the choices.
+``overrides`` (duration, dt, record_every, viscous_damping, liggghts_joints, liggghts_joint_walls) shorten or
+change the run. ``to`` is a target of adapters/registry.py (yade, liggghts, pfc-text, vtu; a block scene: yade,
+the YADE Polyhedra deck): the target's writer writes the deck, what the target cannot take (a variant, an
+option, a run.npz without a model) is refused first in one line naming the choices.
 
 Every deck has ``deck.json`` (engine, variant, source, counts, steps, dt, the files). The folder is assembled
 under a temporary name and renamed into place: a failed export leaves nothing behind.
@@ -120,6 +120,11 @@ def _apply_overrides(run, ov, path):
         run.liggghts_joints = raw
         if open_joint_problem(run):
             raise DeckError(f"{path}: --liggghts-joints = 'open': {open_joint_problem(run)}")
+    if "liggghts_joint_walls" in ov:  # --liggghts-joint-walls: the fixed side of a joint as a mesh wall
+        raw = ov["liggghts_joint_walls"]
+        if raw not in ("nearest", "pairs"):
+            raise DeckError(f"{path}: --liggghts-joint-walls = {raw!r}: must be one of nearest, pairs")
+        run.extra.update(liggghts_joint_walls=True, liggghts_wall_radii=raw == "pairs")
     if "viscous_damping" in ov:  # --viscous-damping: a ratio of critical damping of the first mode, or critical
         raw = ov["viscous_damping"]
         try:

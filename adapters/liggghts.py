@@ -21,10 +21,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from sgim.readback import BadFile
+
 from .liggghts_deck import (MAX_LOAD_GROUPS, RUNNER_FIELDS, VARIANTS, approximations, atom_types, clump_molecules,
                             clump_prescribed, cohesion_matrix, components, deck_box, load_groups, write_deck)
 from .liggghts_joints import joint_closure, joint_exclusions, open_joint_notes, open_joint_problem, open_joints
 from .liggghts_run import check_data, deck_variant, run_deck
+from .liggghts_walls import wall_planes
 from .spec import SphereRun
 
 
@@ -33,6 +36,10 @@ def check_deck(deck):
     (check_data, for the deck's variant) before LIGGGHTS starts; returns the SphereRun."""
     run = SphereRun.load(Path(deck) / "run.npz")
     check_data(Path(deck) / "data", run, deck_variant(deck))
+    for k in range(1, len(wall_planes(run)) + 1):  # run.extra liggghts_joint_walls: the walls' STL files
+        if not (Path(deck) / f"wall_{k}.stl").is_file():
+            raise BadFile(Path(deck) / f"wall_{k}.stl", "missing: the deck's joint wall (run.extra "
+                          "liggghts_joint_walls), written by `adapters export`")
     return run
 
 

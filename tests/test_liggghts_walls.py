@@ -9,7 +9,10 @@ of `cases crossval` slides at 0.995 x Hoek & Bray's critical friction and holds 
 """
 from __future__ import annotations
 
+import json
 import math
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -197,3 +200,25 @@ def test_a_curved_joint_is_refused():
     n[0] = [math.sin(math.radians(1.0)), 0.0, math.cos(math.radians(1.0))]  # one pair's normal 1 deg off
     with pytest.raises(SpecError, match="joint 0 is not planar"):
         jw.wall_planes(replace(run, joint_normal=n))
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "adapters.cli", *map(str, args)], capture_output=True, text=True,
+                          timeout=600)
+
+
+def test_export_option_and_deck_check(tmp_path):
+    run = _block_on_incline(30.0, 20.0, 0.05)
+    run.extra.clear()
+    run.save(tmp_path / "run.npz")
+    p = _cli("export", tmp_path / "run.npz", "--to", "liggghts", "-o", tmp_path / "d", "--variant", "clumps",
+             "--liggghts-joint-walls", "pairs", "--json")
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["joint_walls"] == 1 and (tmp_path / "d" / "wall_1.stl").is_file()
+    for args, words in ((("--to", "liggghts", "--liggghts-joint-walls", "yes"), "--liggghts-joint-walls = 'yes'"),
+                        (("--to", "yade", "--liggghts-joint-walls", "nearest"), "--to liggghts only")):
+        p = _cli("export", tmp_path / "run.npz", "-o", tmp_path / "bad", *args)
+        assert p.returncode != 0 and words in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+    (tmp_path / "d" / "wall_1.stl").unlink()
+    p = _cli("run", tmp_path / "d")
+    assert p.returncode != 0 and "wall_1.stl" in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
