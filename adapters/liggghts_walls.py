@@ -6,16 +6,15 @@ rock (a wedge, planar sliding, a block on an incline), the usual LIGGGHTS model 
 a triangulated wall: ``fix mesh/surface`` from an STL file with an atom type of its own, and ``fix wall/gran``
 with the sphere-wall friction of that type in the ``coefficientFriction peratomtypepair`` matrix.
 
-With run.extra ``liggghts_joint_walls`` true, for every joint (joint_disc) that has pairs of one fixed and one
-free sphere (``wall_planes``):
+With run.extra ``liggghts_joint_walls`` true and smooth joints (without them joint pairs are plain contacts in
+every engine), for every joint (joint_disc) that has pairs of one fixed and one free sphere (``wall_planes``):
 
 - the wall's normal is the mean joint normal of those pairs, signed to point from the fixed to the free side;
 - the wall plane n.x = d touches the nearest free sphere of those pairs (d = min over them of n.c - r: the
   sphere surface touching the joint plane);
 - the fixed spheres on the fixed side of a walled joint (n.c no more than that of the pairs' fixed spheres) are
-  left out (``dropped``): they stay in the
-  data file (the runner's atom ids) with atom type DROPPED_TYPE, which every ``neigh_modify exclude type``
-  keeps out of every contact, and are never integrated;
+  left out (``dropped``): they stay in the data file (the runner's atom ids) with atom type DROPPED_TYPE, which
+  every ``neigh_modify exclude type`` keeps out of every contact, and are never integrated;
 - the wall is one rectangle (two triangles) in that plane covering the projection of the dropped spheres
   behind it (the rock it stands for), enlarged by their largest radius; atom type WALL_TYPE, whose friction
   with every sphere type is run.joint_friction_deg, stiffness run.kn / run.ks and normal damping with the
@@ -46,7 +45,7 @@ def flag(run, key):
 def joint_walls(run):
     """True when the deck writes the rigid sides of joints as mesh walls (run.extra ``liggghts_joint_walls``)
     and some joint pair joins a fixed and a free sphere."""
-    if not flag(run, "liggghts_joint_walls") or not len(run.joint_i):
+    if not flag(run, "liggghts_joint_walls") or not len(run.joint_i) or not run.smooth_joints:
         return False
     fixed = np.asarray(run.fixed, bool)
     return bool(np.any(fixed[run.joint_i] != fixed[run.joint_j]))
@@ -125,7 +124,8 @@ def wall_triangles(run, planes=None):
 
 def wall_radii(run, planes=None):
     """(n,) contact radii with run.extra ``liggghts_wall_radii``: every free sphere of a walled joint's pairs
-    touches the walls (its radius is the least distance from its centre to a wall plane), as every pair of a
+    touches the walls (its radius is the least distance from its centre to a wall plane it lies in front of),
+    as every pair of a
     smooth joint is in contact at its own reference gap; the other spheres keep theirs. Without the option the
     free side rests on its lowest spheres alone (on the r = 0.5 wedge, two per wall: a rigid body on four
     points cannot slide without turning, so it slid at 0.66 % above Hoek & Bray's angle)."""
@@ -138,7 +138,8 @@ def wall_radii(run, planes=None):
     mixed = (fixed[i] != fixed[j]) & np.isin(run.joint_disc, [p["disc"] for p in planes])
     free = np.unique(np.where(fixed[i[mixed]], j[mixed], i[mixed]))
     c = np.asarray(run.centers, float)[free]
-    r[free] = np.min([c @ p["normal"] - p["offset"] for p in planes], axis=0)
+    h = np.array([c @ p["normal"] - p["offset"] for p in planes])
+    r[free] = np.min(np.where(h > 0.0, h, np.inf), axis=0)  # in front of its own wall at least (h >= r there)
     return r
 
 

@@ -192,6 +192,9 @@ def test_a_joint_with_rock_on_both_sides_gets_a_wall_for_each_side():
     assert np.allclose([g[0] for g in got], [-1.0, 1.0], atol=1e-15)
     assert np.allclose([g[1] for g in got], [2 * r, 0.0], atol=1e-15)  # -z = 2 r: the plane z = -2 r
     assert np.array_equal(jw.dropped(run), run.fixed)
+    run.extra["liggghts_wall_radii"] = True  # each block's spheres touch their own wall; the other is behind them
+    assert np.allclose(jw.wall_radii(run), r, rtol=1e-12)
+    assert jw.wall_planes(replace(run, smooth_joints=False)) == []  # plain contacts in every engine: no walls
 
 
 def test_a_curved_joint_is_refused():
