@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dda.contactlaw import ContactLaw
 from dda.limits import check, sphere_bond_key, sphere_dt_source
 from dda.timestep import sphere_critical_dt, sphere_mass
 from sgim.common import SceneError, atomic_npz
@@ -175,7 +176,6 @@ class SphereRun:
 
     def in_house(self):
         """(SphereSet, SphereSimulation) of the in-house engine for this run (dda.spheres)."""
-        from dda.simulation import ContactLaw  # lazy: numba (see the top)
         from dda.spheres import SphereSimulation
 
         ss = _sphere_set(self)
@@ -274,12 +274,13 @@ def joint_pairs(model):
     return model.joint_pairs()
 
 
-def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None, friction_deg=30.0,
-               damping=0.0, joint_friction_deg=None, smooth_joints=True, gravity=(0.0, 0.0, -9.81), dt=None,
+def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=None, ks=None, friction_deg=None,
+               damping=None, joint_friction_deg=None, smooth_joints=True, gravity=(0.0, 0.0, -9.81), dt=None,
                safety=0.5, duration=0.01, record_every=None, local_damping=0.0, name=None, source="",
                force=None, prescribed=None, velocity=None, viscous_damping=0.0):
     """SphereRun of an sgim model (SphereModel or model.npz path). `bonds`: a dda.spheres.BondLaw (default
-    BondLaw()); `fixed`: (n,) bool or None; dt None: `safety` times the in-house critical step. Loads: `force`
+    BondLaw()); `fixed`: (n,) bool or None; `kn`, `ks`, `friction_deg`, `damping` of the unbonded contacts, unset:
+    dda.contactlaw.ContactLaw's defaults; dt None: `safety` times the in-house critical step. Loads: `force`
     (n, 3) or (3,) [N] on each sphere, `prescribed` (n,) bool, `velocity` (n, 3) or (3,) [m/s] (None: none).
     `viscous_damping`: ratio of critical damping of the model's first mode (a number >= 0, or "critical" = 1),
     turned into the coefficient c [N s/m] of SphereRun.viscous_damping by :func:`viscous_coefficient`."""
@@ -296,7 +297,11 @@ def from_model(model, *, density=2600.0, fixed=None, bonds=None, kn=1e8, ks=None
     ss.add_bonds(pairs[np.asarray(model.bonded, bool)], law)
     if fixed is not None:
         ss.fixed[:] = np.asarray(fixed, bool)
+    law0 = ContactLaw()
+    kn = law0.kn if kn is None else kn
     ks = kn / 2 if ks is None else ks
+    friction_deg = law0.friction_deg if friction_deg is None else friction_deg
+    damping = law0.damping if damping is None else damping
     cut, disc, normal = joint_pairs(model)
     cut_all = pairs[~np.asarray(model.bonded, bool)]
     run = SphereRun(
@@ -326,7 +331,6 @@ def critical_dt(run, spheres, safety):
     sphere on its bonds and four contacts), without building the engine. `spheres`: the run's dda SphereSet (its
     spheres and bonds). The run is checked as the engine checks it when it computes the step (ValueError): the
     smooth joints, finite bond stiffness, the contact law, a positive step at `safety`."""
-    from dda.simulation import ContactLaw  # lazy: numba (see the top)
 
     if run.smooth_joints and len(run.joint_i):
         spheres.add_joints(np.c_[run.joint_i, run.joint_j], run.joint_normal, run.joint_friction_deg)

@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -60,6 +59,7 @@ from ._fcp import MAXP
 from ._state import (LAW_KN, LAW_TEN, LAW_ZETA, NENERGY, NLAW, NSTATS, ST_CONTACTS, ST_FCP_ITER, ST_NEED,
                      ST_POINTS, Blocks, Books, Contacts, Deform, Forces, Geometry, Grid, Law, Lists, Loads, Sleep,
                      State)
+from .contactlaw import ContactLaw
 from .progress import tracker
 from .results import Results
 from .system import quat_to_matrix
@@ -70,29 +70,6 @@ def _strain_tensor(e):
 
 
 NPOINT = 8  # contact points assumed in parallel on one block (a block held between two faces) for the critical step
-
-
-@dataclass
-class ContactLaw:
-    """Contact law of block (and sphere) contact points: normal and shear stiffness kn, ks [N/m per point],
-    Coulomb friction [deg], cohesion and tensile strength [Pa], damping [ratio of critical]."""
-
-    kn: float = 1e9
-    ks: float | None = None  # default kn / 2
-    friction_deg: float = 30.0
-    cohesion: float = 0.0
-    tensile: float = 0.0
-    damping: float = 0.0
-
-    def row(self):
-        ks = self.kn / 2 if self.ks is None else self.ks
-        if not (self.kn > 0 and ks > 0):
-            raise ValueError(f"contact stiffness must be > 0 (kn = {self.kn!r}, ks = {ks!r})")
-        if not 0 <= self.friction_deg < 90:
-            raise ValueError(f"friction angle must be in [0, 90) degrees (got {self.friction_deg!r})")
-        if self.cohesion < 0 or self.tensile < 0 or self.damping < 0:
-            raise ValueError("cohesion, tensile strength and damping must be >= 0")
-        return [self.kn, ks, math.tan(math.radians(self.friction_deg)), self.cohesion, self.tensile, self.damping]
 
 
 class BlowUpError(RuntimeError):
