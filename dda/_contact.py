@@ -9,6 +9,7 @@ States: 0 open (no force), 1 locked (elastic shear), 2 sliding (shear at the Cou
 A point is ``bonded`` while its cohesion and tensile strength are intact; the first failure (tension beyond
 the tensile strength or shear beyond the cohesive limit) breaks it for good. When a point opens, the energy
 left in its shear spring is released and counted with the friction dissipation (it leaves the system).
+``point_force`` is inlined where it is called, as dda/_kinematics.py's kernels are (see there why).
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from numba import njit
 OPEN, LOCKED, SLIDING = 0, 1, 2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_force(kn, ks, tanphi, coh_force, ten_force, zeta, meff, depth, n, vrel, dt, us, bonded, out_f):
     """Force on block B (A -> B normal n) at one point. Updates us in place.
 

@@ -170,7 +170,8 @@ def deform_geometry(i, pos, R, strain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw,
         fdw[f] = d
 
 
-@njit(cache=True)
+# inlined: called per contact point (dda/_kinematics.py says why)
+@njit(cache=True, inline="always")
 def body_point(i, p, pos, R, strain, X):
     """Undeformed body offset X of the world point p of block i: X = (I + E)^-1 R^T (p - x0)."""
     F = np.empty((3, 3))
@@ -189,7 +190,8 @@ def body_point(i, p, pos, R, strain, X):
         X[a] = Fi[a, 0] * b0 + Fi[a, 1] * b1 + Fi[a, 2] * b2
 
 
-@njit(cache=True)
+# inlined: called per contact point (dda/_kinematics.py says why)
+@njit(cache=True, inline="always")
 def point_velocity(i, p, pos, quat_R, strain, srate, wb, out):
     """Velocity of the world point p of deformable block i relative to its centroid: w x (p - x0) + R Edot X."""
     X = np.empty(3)
@@ -211,7 +213,8 @@ def point_velocity(i, p, pos, quat_R, strain, srate, wb, out):
     out[2] = w0 * ry - w1 * rx + R[2, 0] * u0 + R[2, 1] * u1 + R[2, 2] * u2
 
 
-@njit(cache=True)
+# inlined: called per contact point (dda/_kinematics.py says why)
+@njit(cache=True, inline="always")
 def add_strain_force(i, X, R, f, sign, qs):
     """qs[i] += sign * T_strain(X)^T R^T f (the strain part of T^T f for a world force f at body offset X)."""
     f0 = sign * (R[0, 0] * f[0] + R[1, 0] * f[1] + R[2, 0] * f[2])

@@ -173,23 +173,25 @@ def _rebuild_moving(grid, lists, static):
 @njit(cache=True)
 def move_geometry(blocks, deform, geom, grid, lists, static, R):
     """Stage 1: world vertices, face planes and boxes of the moving blocks; blocks whose box left their cells
-    are re-mapped and the moving grid rebuilt. Returns the lists (new grids after a rebuild)."""
+    are re-mapped and the moving grid rebuilt. Returns the lists (new grids after a rebuild). The arrays the
+    loop uses are taken out of their bundles once, before it."""
     rebuild = False
-    aabb, cellbox = geom.aabb, grid.cellbox
-    for k in range(lists.active.shape[0]):
-        i = lists.active[k]
-        if blocks.dof12[i]:
-            quat_matrix(blocks.quat[i], R)
-            deform_geometry(i, blocks.pos, R, deform.strain, geom.vs, geom.fs, geom.vloc, geom.nloc, geom.dloc,
-                            geom.vert, geom.fnw, geom.fdw, aabb)
+    pos, quat, dof12, strain, large = blocks.pos, blocks.quat, blocks.dof12, deform.strain, grid.large
+    vs, fs, vloc, nloc, dloc, vert, fnw, fdw = geom.vs, geom.fs, geom.vloc, geom.nloc, geom.dloc, geom.vert, \
+        geom.fnw, geom.fdw
+    aabb, cellbox, S, margin, active = geom.aabb, grid.cellbox, grid.S, grid.margin, lists.active
+    for k in range(active.shape[0]):
+        i = active[k]
+        if dof12[i]:
+            quat_matrix(quat[i], R)
+            deform_geometry(i, pos, R, strain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb)
         else:
-            update_geometry(i, blocks.pos, blocks.quat, geom.vs, geom.fs, geom.vloc, geom.nloc, geom.dloc,
-                            geom.vert, geom.fnw, geom.fdw, aabb)
-        if not inside_cells(aabb, i, grid.S, cellbox):
-            map_cells(aabb, i, grid.S, grid.margin, cellbox)
+            update_geometry(i, pos, quat, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb)
+        if not inside_cells(aabb, i, S, cellbox):
+            map_cells(aabb, i, S, margin, cellbox)
             if n_cells(cellbox, i) > 64:
-                if not grid.large[i]:
-                    grid.large[i] = True
+                if not large[i]:
+                    large[i] = True
             rebuild = True
     if rebuild:
         return _rebuild_moving(grid, lists, static)
@@ -233,10 +235,8 @@ def reset_forces(active, dof12, forces, loads):
 
 
 @njit(cache=True, inline="always")
-def _prescribed_step(i, dt, blocks, forces, acc, qh):
+def _prescribed_step(i, dt, pos, vel, quat, wpres, force, torque, acc, qh):
     """Prescribed motion of block i: the driver does the work the contacts do against it."""
-    vel, wpres, quat, pos = blocks.vel, blocks.wpres, blocks.quat, blocks.pos
-    force, torque = forces.force, forces.torque
     acc[ACC_DRIVER] -= dt * (force[i, 0] * vel[i, 0] + force[i, 1] * vel[i, 1] + force[i, 2] * vel[i, 2]
                              + torque[i, 0] * wpres[i, 0] + torque[i, 1] * wpres[i, 1] + torque[i, 2] * wpres[i, 2])
     turn(quat[i], wpres[i], dt, qh)
@@ -247,10 +247,9 @@ def _prescribed_step(i, dt, blocks, forces, acc, qh):
 
 
 @njit(cache=True, inline="always")
-def _point_loads(i, R, loads, forces, pos, tally):
+def _point_loads(i, R, pl_start, pl_r, pl_f, force, torque, pos, tally):
     """Constant point loads of rigid block i (world force at a body point) and their potential."""
-    pl_r, pl_f, force, torque = loads.pl_r, loads.pl_f, forces.force, forces.torque
-    for p in range(loads.pl_start[i], loads.pl_start[i + 1]):
+    for p in range(pl_start[i], pl_start[i + 1]):
         r0 = R[0, 0] * pl_r[p, 0] + R[0, 1] * pl_r[p, 1] + R[0, 2] * pl_r[p, 2]
         r1 = R[1, 0] * pl_r[p, 0] + R[1, 1] * pl_r[p, 1] + R[1, 2] * pl_r[p, 2]
         r2 = R[2, 0] * pl_r[p, 0] + R[2, 1] * pl_r[p, 1] + R[2, 2] * pl_r[p, 2]
@@ -266,78 +265,27 @@ def _point_loads(i, R, loads, forces, pos, tally):
         tally[T_POT] -= f0 * (pos[i, 0] + r0) + f1 * (pos[i, 1] + r1) + f2 * (pos[i, 2] + r2)
 
 
-@njit(cache=True, inline="always")
-def _rigid_step(i, dt, dtavg, local_damp, blocks, loads, forces, sleep, work, tally):
-    """Central difference of rigid block i (module docstring); kinetic and potential energy and the local
-    damping work into tally; the calm-step counter when sleeping is on. Returns True when non-finite."""
-    pos, vel, quat, angmom, inertia = blocks.pos, blocks.vel, blocks.quat, blocks.angmom, blocks.inertia
-    force, torque, gravity, bforce = forces.force, forces.torque, loads.gravity, loads.bforce
-    R, w_old, w_new, Lnew, qh = work.R, work.w_old, work.w_new, work.Lnew, work.qh
-    m = blocks.mass[i]
-    quat_matrix(quat[i], R)
-    _point_loads(i, R, loads, forces, pos, tally)
-    ang_vel(R, inertia[i], angmom[i], w_old)
-    fsq = 0.0
-    tsq = 0.0
-    for a in range(3):
-        f = force[i, a] + m * gravity[a] + bforce[i, a]
-        t = torque[i, a]
-        fsq += f * f
-        tsq += t * t
-        if local_damp > 0.0:
-            if vel[i, a] != 0.0:
-                fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
-                f -= fd
-                tally[T_LOCAL] += fd * vel[i, a] * dtavg
-            if w_old[a] != 0.0:
-                td = local_damp * abs(t) * (1.0 if w_old[a] > 0 else -1.0)
-                t -= td
-                tally[T_LOCAL] += td * w_old[a] * dtavg
-        vnew = vel[i, a] + dtavg * f / m
-        tally[T_KIN] += 0.5 * m * vel[i, a] * vnew
-        vel[i, a] = vnew
-        Lnew[a] = angmom[i, a] + dtavg * t
-        tally[T_POT] -= (m * gravity[a] + bforce[i, a]) * pos[i, a]
-    ang_vel(R, inertia[i], Lnew, w_new)
-    tally[T_KIN] += 0.5 * (angmom[i, 0] * w_new[0] + angmom[i, 1] * w_new[1] + angmom[i, 2] * w_new[2])
-    if sleep.par[0] > 0.0:
-        sz = blocks.size_b[i]
-        spd = np.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) \
-            + sz * np.sqrt(w_new[0] ** 2 + w_new[1] ** 2 + w_new[2] ** 2)
-        imin = min(inertia[i, 0], min(inertia[i, 1], inertia[i, 2]))
-        acl = np.sqrt(fsq) / m + sz * np.sqrt(tsq) / imin
-        if spd < sleep.par[1] and acl < sleep.par[2]:
-            sleep.calm[i] += 1
-        else:
-            sleep.calm[i] = 0
-    # mid-step orientation predictor, then the full turn
-    turn(quat[i], w_new, 0.5 * dt, qh)
-    quat_matrix(qh, R)
-    ang_vel(R, inertia[i], Lnew, w_new)
-    turn(quat[i], w_new, dt, qh)
-    for a in range(4):
-        quat[i, a] = qh[a]
-    blown = False
-    for a in range(3):
-        angmom[i, a] = Lnew[a]
-        pos[i, a] += dt * vel[i, a]
-        if not np.isfinite(pos[i, a]) or not np.isfinite(vel[i, a]) or not np.isfinite(Lnew[a]):
-            blown = True
-    return blown
-
-
 @njit(cache=True)
 def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sleep, acc, work, tally):
     """Stage 4: central difference of the moving blocks (prescribed, deformable, rigid). Returns True when the
-    state became non-finite."""
+    state became non-finite. The arrays the loop uses are taken out of their bundles once, before it (numba's
+    reference counts: dda/_narrow.py's docstring)."""
     dtavg = 0.5 * (dt + dt_prev)
     blown = False
+    pos, vel, quat, angmom, inertia, mass = blocks.pos, blocks.vel, blocks.quat, blocks.angmom, blocks.inertia, \
+        blocks.mass
+    kin, dof12, wpres, size_b = blocks.kin, blocks.dof12, blocks.wpres, blocks.size_b
+    force, torque, gravity, bforce = forces.force, forces.torque, loads.gravity, loads.bforce
+    pl_start, pl_r, pl_f = loads.pl_start, loads.pl_r, loads.pl_f
+    R, w_old, w_new, Lnew, qh = work.R, work.w_old, work.w_new, work.Lnew, work.qh
+    par, calm = sleep.par, sleep.calm
+    sleep_on = par[0] > 0.0
     for k in range(active.shape[0]):
         i = active[k]
-        if blocks.kin[i]:
-            _prescribed_step(i, dt, blocks, forces, acc, work.qh)
+        if kin[i]:
+            _prescribed_step(i, dt, pos, vel, quat, wpres, force, torque, acc, qh)
             continue
-        if blocks.dof12[i]:
+        if dof12[i]:
             ke_i, pe_i, es_i, dl_i, bl_i = deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces)
             tally[T_KIN] += ke_i
             tally[T_POT] += pe_i
@@ -346,8 +294,58 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
             if bl_i:
                 blown = True
             continue
-        if _rigid_step(i, dt, dtavg, local_damp, blocks, loads, forces, sleep, work, tally):
-            blown = True
+        # rigid block: central difference (module docstring), written out here rather than in helpers: the
+        # arrays a helper takes as parameters would be counted in and out per block
+        m = mass[i]
+        quat_matrix(quat[i], R)
+        _point_loads(i, R, pl_start, pl_r, pl_f, force, torque, pos, tally)
+        ang_vel(R, inertia[i], angmom[i], w_old)
+        fsq = 0.0
+        tsq = 0.0
+        for a in range(3):
+            f = force[i, a] + m * gravity[a] + bforce[i, a]
+            t = torque[i, a]
+            fsq += f * f
+            tsq += t * t
+            if local_damp > 0.0:
+                if vel[i, a] != 0.0:
+                    fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
+                    f -= fd
+                    tally[T_LOCAL] += fd * vel[i, a] * dtavg
+                if w_old[a] != 0.0:
+                    td = local_damp * abs(t) * (1.0 if w_old[a] > 0 else -1.0)
+                    t -= td
+                    tally[T_LOCAL] += td * w_old[a] * dtavg
+            vnew = vel[i, a] + dtavg * f / m
+            tally[T_KIN] += 0.5 * m * vel[i, a] * vnew
+            vel[i, a] = vnew
+            Lnew[a] = angmom[i, a] + dtavg * t
+            tally[T_POT] -= (m * gravity[a] + bforce[i, a]) * pos[i, a]
+        ang_vel(R, inertia[i], Lnew, w_new)
+        tally[T_KIN] += 0.5 * (angmom[i, 0] * w_new[0] + angmom[i, 1] * w_new[1] + angmom[i, 2] * w_new[2])
+        if sleep_on:
+            # the calm-step counter: speed and acceleration below par[1] and par[2]
+            sz = size_b[i]
+            spd = np.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) \
+                + sz * np.sqrt(w_new[0] ** 2 + w_new[1] ** 2 + w_new[2] ** 2)
+            imin = min(inertia[i, 0], min(inertia[i, 1], inertia[i, 2]))
+            acl = np.sqrt(fsq) / m + sz * np.sqrt(tsq) / imin
+            if spd < par[1] and acl < par[2]:
+                calm[i] += 1
+            else:
+                calm[i] = 0
+        # mid-step orientation predictor, then the full turn
+        turn(quat[i], w_new, 0.5 * dt, qh)
+        quat_matrix(qh, R)
+        ang_vel(R, inertia[i], Lnew, w_new)
+        turn(quat[i], w_new, dt, qh)
+        for a in range(4):
+            quat[i, a] = qh[a]
+        for a in range(3):
+            angmom[i, a] = Lnew[a]
+            pos[i, a] += dt * vel[i, a]
+            if not np.isfinite(pos[i, a]) or not np.isfinite(vel[i, a]) or not np.isfinite(Lnew[a]):
+                blown = True
     return blown
 
 

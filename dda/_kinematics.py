@@ -1,11 +1,15 @@
-"""numba kernels: rotations of the block engine (quaternion to matrix, angular velocity, quaternion turn)."""
+"""numba kernels: rotations of the block engine (quaternion to matrix, angular velocity, quaternion turn).
+
+They are inlined where they are called (``inline="always"``): a call that numba does not inline, inside a
+per-block or per-point loop, keeps it from removing the reference-count increments and decrements of the arrays
+the loop's inlined helpers hold across that call (dda/_narrow.py's docstring)."""
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def quat_matrix(q, R):
     """R = the rotation matrix of the unit quaternion q = (w, x, y, z)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
@@ -20,7 +24,7 @@ def quat_matrix(q, R):
     R[2, 2] = 1 - 2 * (x * x + y * y)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def ang_vel(R, inertia_i, L, out):
     # w = R I^-1 R^T L
     b0 = R[0, 0] * L[0] + R[1, 0] * L[1] + R[2, 0] * L[2]
@@ -33,7 +37,7 @@ def ang_vel(R, inertia_i, L, out):
         out[a] = R[a, 0] * b0 + R[a, 1] * b1 + R[a, 2] * b2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def turn(q, w, h, out):
     """out = exp(w h) * q (w in the world frame), normalised."""
     wl = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
@@ -56,7 +60,7 @@ def turn(q, w, h, out):
     out[3] = o3 / ln
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def omega(j, kin, static, wpres, quat, inertia, angmom, R, out):
     """World angular velocity of body j (prescribed, zero when fixed or asleep, else R I^-1 R^T L)."""
     if kin[j]:
