@@ -358,7 +358,8 @@ def _read_spheres(rd, data, path):
 
 
 GENERATOR_SIZES = {"size", "height", "b", "h", "depth", "base_length", "base_thickness", "brick", "projectile",
-                   "spacing", "side", "clearance", "gap", "run", "margin"}  # [[generate]] lengths [m]
+                   "spacing", "side", "clearance", "gap", "run", "margin", "hit_height",
+                   "floor_margin"}  # [[generate]] lengths [m]
 
 
 def generator_parameters(fn):
@@ -369,7 +370,8 @@ def generator_parameters(fn):
 
 def _generator_types(rd, fn, params, key):
     """A [[generate]] parameter whose default is a number, a string, a flag or a list of numbers must be given as
-    one (the generators would convert "13" to 13 without a word)."""
+    one, and an optional length (default None) as a number (the generators would convert "13" to 13 without a
+    word)."""
     sig = inspect.signature(fn).parameters
     allowed = generator_parameters(fn)
     for p, v in params.items():
@@ -388,6 +390,12 @@ def _generator_types(rd, fn, params, key):
         elif isinstance(d, str):
             if not isinstance(v, str):
                 rd.err(f"{key}.{p}", v, "must be a string")
+        elif d is None and p in GENERATOR_SIZES:
+            if not num:  # an optional length (None: the generator's own choice)
+                rd.err(f"{key}.{p}", v, "must be a number (m)")
+        elif d is None and p.endswith("material"):
+            if not isinstance(v, str):  # an optional material name (None: the block's own material)
+                rd.err(f"{key}.{p}", v, "must be a string (a material name)")
         elif isinstance(d, (tuple, list)) and d and all(isinstance(x, (int, float)) for x in d):
             if not (isinstance(v, list) and len(v) == len(d)
                     and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):

@@ -271,3 +271,25 @@ def test_a_generator_parameter_typo_names_the_allowed_parameters(tmp_path, capsy
     assert line.endswith(", ".join(inspect.signature(GENERATORS["incline"]).parameters))
     assert "progress" in inspect.signature(GENERATORS["box_cut"]).parameters  # the run's callback ...
     assert "progress" not in generator_parameters(GENERATORS["box_cut"])  # ... is no scene key
+
+
+def test_every_optional_generator_parameter_refuses_a_string(tmp_path, capsys):
+    """The parameters a generator leaves to its own choice (default None) are checked like the others: a length
+    given as "1.0" or a material given as a number is one line naming the key, not a silently converted run."""
+    import inspect
+
+    from dda.generate import GENERATORS
+    from dda.scene import generator_parameters
+
+    cases = [(kind, p) for kind, fn in GENERATORS.items() for p in generator_parameters(fn)
+             if inspect.signature(fn).parameters[p].default is None]
+    assert len(cases) >= 9  # height, depth, base_length, ..., the optional materials
+    for kind, p in cases:
+        bad = '"1.0"' if not p.endswith("material") else "1.0"
+        scene = _write(tmp_path, f'name = "x"\n[simulation]\nduration = 1\n[contact]\nkn = 1e9\n'
+                                 f'[[generate]]\nkind = "{kind}"\n{p} = {bad}\n')
+        out = tmp_path / f"out_{kind}_{p}"
+        assert main(["run", str(scene), "-o", str(out), "--quiet"]) == 2, (kind, p)
+        (line,) = capsys.readouterr().err.strip().splitlines()
+        assert f"generate[0].{p} = " in line and "must be a" in line, line
+        assert not out.exists()
