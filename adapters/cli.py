@@ -36,7 +36,7 @@ def cmd_export(args):
         return 0
     overrides = {"duration": args.duration, "dt": args.dt, "record_every": args.record_every,
                  "viscous_damping": args.viscous_damping, "liggghts_joints": args.liggghts_joints,
-                 "liggghts_joint_walls": args.liggghts_joint_walls}
+                 "liggghts_joint_walls": args.liggghts_joint_walls, "joint_walls": args.joint_walls}
     info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say,
                   max_steps=positive_int(args.max_steps, "--max-steps"), force=args.force)
     if args.json:
@@ -84,11 +84,13 @@ def main(argv=None):
                                                             "open (no contact between green and blue spheres: exact "
                                                             "while the joints stay open; overrides [spheres] "
                                                             "liggghts_joints)")
-    p.add_argument("--liggghts-joint-walls", metavar="HOW", help="liggghts: the fixed side of each joint as a plane "
-                                                                 "mesh wall with the joint friction, touching the "
-                                                                 "nearest free sphere (nearest) or every free sphere "
-                                                                 "of the joint's pairs (pairs: grown contact radii, "
-                                                                 "--variant clumps)")
+    p.add_argument("--joint-walls", metavar="HOW", help="yade, liggghts (and adapters run --in-house): the fixed "
+                                                        "side of each joint as a plane wall with the joint friction "
+                                                        "(YADE facet, LIGGGHTS mesh wall, in-house slab), touching "
+                                                        "the nearest free sphere (nearest) or every free sphere of "
+                                                        "the joint's pairs (pairs: grown contact radii, liggghts "
+                                                        "--variant clumps only)")
+    p.add_argument("--liggghts-joint-walls", metavar="HOW", help="liggghts: the older spelling of --joint-walls")
     p.add_argument("--max-steps", metavar="N", help="refuse a deck of more than N steps (duration / dt; overrides "
                                                     "the scene's [simulation] max_steps, default 1e8)")
     p.add_argument("--json", action="store_true", help="print deck.json")

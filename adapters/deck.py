@@ -8,8 +8,8 @@
 - an sgim ``model.npz``: run with default settings;
 - a ``run.npz`` (a deck's SphereRun): as it is.
 
-``overrides`` (duration, dt, record_every, viscous_damping, liggghts_joints, liggghts_joint_walls) shorten or
-change the run. ``to`` is a target of adapters/registry.py (yade, liggghts, pfc-text, vtu; a block scene: yade,
+``overrides`` (duration, dt, record_every, viscous_damping, liggghts_joints, joint_walls or its older spelling
+liggghts_joint_walls) shorten or change the run. ``to`` is a target of adapters/registry.py (yade, liggghts, pfc-text, vtu; a block scene: yade,
 the YADE Polyhedra deck): the target's writer writes the deck, what the target cannot take (a variant, an
 option, a run.npz without a model) is refused first in one line naming the choices.
 
@@ -31,6 +31,7 @@ from sgim.readback import Fields, read_json, read_npz
 
 from . import registry
 from .frames import write_result_frames
+from .joint_walls import MODES
 from .liggghts_joints import open_joint_problem
 from .process import EngineError
 from .spec import (LIGGGHTS_JOINTS, SpecError, SphereRun, check_run, check_steps, from_model, from_scene,
@@ -120,11 +121,14 @@ def _apply_overrides(run, ov, path):
         run.liggghts_joints = raw
         if open_joint_problem(run):
             raise DeckError(f"{path}: --liggghts-joints = 'open': {open_joint_problem(run)}")
-    if "liggghts_joint_walls" in ov:  # --liggghts-joint-walls: the fixed side of a joint as a mesh wall
-        raw = ov["liggghts_joint_walls"]
-        if raw not in ("nearest", "pairs"):
-            raise DeckError(f"{path}: --liggghts-joint-walls = {raw!r}: must be one of nearest, pairs")
-        run.extra.update(liggghts_joint_walls=True, liggghts_wall_radii=raw == "pairs")
+    for key in ("liggghts_joint_walls", "joint_walls"):  # --joint-walls (and its older LIGGGHTS spelling)
+        if key in ov:  # the fixed side of a joint as a wall (adapters/joint_walls.py)
+            raw = ov[key]
+            if raw not in MODES:
+                raise DeckError(f"{path}: --{key.replace('_', '-')} = {raw!r}: must be one of {', '.join(MODES)}")
+            for old in ("liggghts_joint_walls", "liggghts_wall_radii"):
+                run.extra.pop(old, None)
+            run.extra["joint_walls"] = raw
     if "viscous_damping" in ov:  # --viscous-damping: a ratio of critical damping of the first mode, or critical
         raw = ov["viscous_damping"]
         try:

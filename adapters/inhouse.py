@@ -34,6 +34,7 @@ from .deck import read_deck
 from .frames import write_result_frames
 from .process import EngineError
 from .result import COMPLETE, INCOMPLETE, RunResult
+from . import joint_walls as jw
 from .spec import SphereRun, liggghts_only
 
 POS_LIMIT = 5_000_000  # record positions when n * records <= POS_LIMIT
@@ -77,8 +78,30 @@ def reordered(run, perm):
 
 
 def approximations(run):
-    """What the in-house engine does not represent of `run`: strings naming the scene key (RunResult.extra)."""
-    return liggghts_only(run)  # every key of a run: bonds, joints, loads, contact, local, viscous and bond damping
+    """What the in-house engine does not represent of `run`: strings naming the scene key (RunResult.extra):
+    every key of a run (bonds, joints, loads, contact, local, viscous and bond damping), and the joint walls when
+    run.extra joint_walls asks for them."""
+    return liggghts_only(run) + jw.notes(run, "a fixed convex slab (sphere-polyhedron contact at its closest point, "
+                                              "the contact law of the spheres)")
+
+
+def wall_slabs(run, planes=None):
+    """(kept (n,) bool, BlockSpecs) of run.extra joint_walls (adapters/joint_walls.py) in-house: each wall's
+    rectangle as the top face of a fixed convex slab 2 r_max thick behind it; kept: the spheres the engine runs
+    (not the rock the walls stand for). Mode "pairs" is refused (the spheres keep their radii here)."""
+    from dda.blockspec import BlockSpec  # lazy: dda's package top loads numba
+
+    planes = jw.wall_planes(run) if planes is None else planes
+    if not planes:
+        return np.ones(run.n, bool), []
+    jw.only_nearest(run, "the in-house engine")
+    t = 2.0 * float(np.max(run.radii))
+    specs = []
+    for p, q in zip(planes, jw.wall_rectangles(run, planes)):
+        v = np.r_[q, q - t * p["normal"]]
+        specs.append(BlockSpec(v, [[0, 1, 2, 3], [7, 6, 5, 4], [0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3],
+                                   [3, 7, 4, 0]], name=f"joint{p['disc']}", fixed=True))
+    return ~jw.dropped(run, planes), specs
 
 
 def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
@@ -87,14 +110,18 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
     from dda.simulation import BlowUpError  # lazy: numba, loaded by the run anyway (run.in_house())
 
     t_setup = time.perf_counter()
-    perm = spatial_order(run.centers, run.radii)
+    kept, slabs = wall_slabs(run)  # run.extra joint_walls: the rock behind a wall is left out of the engine
+    sub = run.subset(kept) if slabs else run
+    at, bonds_at = np.flatnonzero(kept), np.flatnonzero(kept[run.bond_i] & kept[run.bond_j])
+    perm = spatial_order(sub.centers, sub.radii)
     inv = np.empty_like(perm)
     inv[perm] = np.arange(len(perm))
-    local, border = reordered(run, perm)
-    ss, sim = local.in_house()
+    local, border = reordered(sub, perm)
+    ss, sim = local.in_house(slabs, run.joint_friction_deg) if slabs else local.in_house()
     sim.record_positions = False  # recorded here
     setup_s = time.perf_counter() - t_setup
-    n = ss.n
+    n = run.n
+    x0 = np.asarray(run.centers, float)
     steps, rec = run.steps, run.record_steps
     n_records = 1 + -(-steps // rec)
     keep_pos = n * n_records <= POS_LIMIT
@@ -104,17 +131,19 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
     times, kin, nbond, poses = [], [], [], []
     last = {}
 
-    def record():
+    def record():  # in the run's numbering: the spheres behind joint walls stay where they are, bonds intact
         v, w = sim.v[free], sim.w[free]
         times.append(sim.steps * run.dt)
         kin.append(float(0.5 * np.sum(mass * np.einsum("ij,ij->i", v, v))
                          + 0.5 * np.sum(inertia * np.einsum("ij,ij->i", w, w))))
-        nbond.append(int(sim.bond_intact.sum()))
+        pos, vel = x0.copy(), np.zeros_like(x0)
+        pos[at], vel[at] = sim.x[inv], sim.v[inv]
         if keep_pos:
-            poses.append(sim.x[inv])
-        intact = np.empty(len(border), bool)
-        intact[border] = sim.bond_intact
-        last.update(pos=sim.x[inv], vel=sim.v[inv], intact=intact, step=sim.steps)
+            poses.append(pos)
+        intact = np.ones(run.n_bonds, bool)
+        intact[bonds_at[border]] = sim.bond_intact
+        nbond.append(int(intact.sum()))
+        last.update(pos=pos, vel=vel, intact=intact, step=sim.steps)
 
     def result(status, message, wall):
         pos = np.asarray(poses) if keep_pos and poses else (np.zeros((0, n, 3)) if keep_pos else None)
@@ -122,7 +151,7 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
                         final_vel=last["vel"], bond_intact=last["intact"], time=np.asarray(times, float), pos=pos,
                         series={"kinetic": np.asarray(kin, float), "bonds_intact": np.asarray(nbond, np.int64)},
                         status=status, message=message, steps=int(last["step"]), dt=float(run.dt), wall_s=wall,
-                        extra={"approximations": approximations(run), "setup_s": setup_s,
+                        extra={"approximations": approximations(run), "setup_s": setup_s, "joint_walls": len(slabs),
                                "cpu_s": time.process_time() - c0,
                                "pair_list_builds": int(sim.stats[7]),
                                "smooth_joints": int(ss.n_joints), "threads": 1})

@@ -11,7 +11,8 @@ By role:
 - adapters/liggghts_deck.py: the deck (atom types, load groups, the box, the variants bonds / sjkr / clumps,
   what LIGGGHTS-PUBLIC cannot do exactly);
 - adapters/liggghts_joints.py: spheres.liggghts_joints = "open" (no contact across a joint);
-- adapters/liggghts_walls.py: run.extra liggghts_joint_walls (the fixed side of a joint as a mesh wall);
+- adapters/liggghts_walls.py: run.extra joint_walls (the fixed side of a joint as a mesh wall; geometry in
+  adapters/joint_walls.py);
 - adapters/liggghts_run.py: the runner (bond breakage between chunks, results) and the deck read back;
 - adapters/_liggghts_io.py: the data file, the dump reader and the engine driver.
 
@@ -36,10 +37,10 @@ def check_deck(deck):
     (check_data, for the deck's variant) before LIGGGHTS starts; returns the SphereRun."""
     run = SphereRun.load(Path(deck) / "run.npz")
     check_data(Path(deck) / "data", run, deck_variant(deck))
-    for k in range(1, len(wall_planes(run)) + 1):  # run.extra liggghts_joint_walls: the walls' STL files
+    for k in range(1, len(wall_planes(run)) + 1):  # run.extra joint_walls: the walls' STL files
         if not (Path(deck) / f"wall_{k}.stl").is_file():
             raise BadFile(Path(deck) / f"wall_{k}.stl", "missing: the deck's joint wall (run.extra "
-                          "liggghts_joint_walls), written by `adapters export`")
+                          "joint_walls), written by `adapters export`")
     return run
 
 

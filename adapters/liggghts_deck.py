@@ -313,7 +313,7 @@ def approximations(run: SphereRun, variant):
                    f"contact only beyond a compressive strain of about {2 * bond_gap(run):g}")
     out += jw.wall_notes(run)
     if jw.joint_walls(run) and variant != "clumps":
-        out.append(f"liggghts_joint_walls with the {variant} variant: a sphere turns freely (central bonds, adhesion), "
+        out.append(f"{jw.mode(run)[1]} with the {variant} variant: a sphere turns freely (central bonds, adhesion), "
                    "so it rolls on a wall like a ball bearing and the wall's friction barely holds a block of spheres "
                    "(the clumps variant makes it one rigid body)")
     if open_joints(run):
@@ -401,7 +401,7 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
         mol, fixed, n_bodies = clump_molecules(run)
     pres, _, vgroups, fgroups = load_groups(run, variant)
     types = atom_types(run, fixed | pres)  # prescribed spheres: typed as fixed (not integrated)
-    planes = jw.wall_planes(run)  # run.extra liggghts_joint_walls: rigid-side joints as mesh walls
+    planes = jw.wall_planes(run)  # run.extra joint_walls: rigid-side joints as mesh walls
     types[jw.dropped(run, planes)] = jw.DROPPED_TYPE
     n_types = jw.WALL_TYPES if planes else N_TYPES
     box = deck_box(run)
@@ -420,10 +420,11 @@ def write_deck(run: SphereRun, folder, variant="bonds"):
     elif variant == "bonds" and bond_gap(run) > 0:  # bonded pairs keep clear of the granular contact
         radii = run.radii * (1.0 - bond_gap(run))
         density = run.density * (run.radii / radii) ** 3
-    if planes and jw.flag(run, "liggghts_wall_radii"):  # every sphere of a walled joint pair touches the wall
+    if planes and jw.mode(run)[0] == "pairs":  # every sphere of a walled joint pair touches the wall
         if variant != "clumps":
-            raise SpecError(f"{run.source or run.name}: run.extra liggghts_wall_radii grows the radii of the spheres "
-                            f"on the walls, which needs the clumps variant (no contacts inside a body), not {variant}")
+            raise SpecError(f"{run.source or run.name}: run.extra {jw.mode(run)[1]} (\"pairs\") grows the radii of the "
+                            "spheres on the walls, which needs the clumps variant (no contacts inside a body), not "
+                            f"{variant}")
         radii = jw.wall_radii(run, planes)
         density = run.density * (run.radii / radii) ** 3
     write_data(folder / "data", run.centers, radii, density, types, mol, n_types, box, bonds=bonds,

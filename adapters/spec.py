@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -174,15 +174,39 @@ class SphereRun:
         usable run raises sgim.readback.BadFile (a CliError: ``FILE: what is wrong``)."""
         return cls(**check_run(path, read_npz(path, "a run.npz")))
 
-    def in_house(self):
-        """(SphereSet, SphereSimulation) of the in-house engine for this run (dda.spheres)."""
+    def in_house(self, walls=None, wall_friction_deg=None):
+        """(SphereSet, SphereSimulation) of the in-house engine for this run (dda.spheres); `walls`: fixed convex
+        polyhedra (BlockSpecs) with the run's contact law at `wall_friction_deg` (default friction_deg)."""
         from dda.spheres import SphereSimulation
 
         ss = _sphere_set(self)
         law = ContactLaw(kn=self.kn, ks=self.ks, friction_deg=self.friction_deg, damping=self.damping)
-        sim = SphereSimulation(ss, law, gravity=self.gravity, dt=self.dt, local_damping=self.local_damping,
-                               viscous_damping=self.viscous_damping)
+        wall_law = None if wall_friction_deg is None else ContactLaw(
+            kn=self.kn, ks=self.ks, friction_deg=float(wall_friction_deg), damping=self.damping)
+        sim = SphereSimulation(ss, law, walls=walls, wall_law=wall_law, gravity=self.gravity, dt=self.dt,
+                               local_damping=self.local_damping, viscous_damping=self.viscous_damping)
         return ss, sim
+
+    def subset(self, keep):
+        """A copy of this run with the spheres `keep` ((n,) bool) alone, and the bonds, joints and cut pairs
+        between them (their order kept, sphere indices renumbered)."""
+        keep = np.asarray(keep, bool)
+        new = np.full(self.n, -1, np.int64)
+        new[keep] = np.arange(int(keep.sum()))
+        bond = keep[self.bond_i] & keep[self.bond_j]
+        joint = keep[self.joint_i] & keep[self.joint_j]
+        cut = keep[self.cut_i] & keep[self.cut_j]
+        per_bond = ("bond_len0", "bond_kn", "bond_ks", "bond_ft", "bond_fs", "bond_zeta")
+        return replace(
+            self, centers=np.asarray(self.centers)[keep], radii=np.asarray(self.radii)[keep],
+            colour=np.asarray(self.colour)[keep], fixed=np.asarray(self.fixed, bool)[keep],
+            bond_i=new[self.bond_i[bond]], bond_j=new[self.bond_j[bond]],
+            **{k: np.asarray(getattr(self, k))[bond] for k in per_bond},
+            joint_i=new[self.joint_i[joint]], joint_j=new[self.joint_j[joint]],
+            joint_disc=np.asarray(self.joint_disc)[joint],
+            joint_normal=np.asarray(self.joint_normal).reshape(-1, 3)[joint], cut_i=new[self.cut_i[cut]],
+            cut_j=new[self.cut_j[cut]], force=np.asarray(self.force)[keep],
+            prescribed=np.asarray(self.prescribed)[keep], velocity=np.asarray(self.velocity)[keep])
 
 
 HEADER = ("name", "density", "kn", "ks", "friction_deg", "damping", "joint_friction_deg", "smooth_joints", "dt",

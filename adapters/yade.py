@@ -61,7 +61,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sgim.readback import BadFile, Fields, read_json, read_npz
+from sgim.readback import Arrays, BadFile, Fields, read_json, read_npz
+
+from . import joint_walls as jw
 
 from .process import EngineError, describe_failure, find_engine, run_process, unbuffered
 from .result import COMPLETE, INCOMPLETE, RunResult
@@ -90,7 +92,37 @@ def approximations(run: SphereRun):
     if run.smooth_joints and len(run.joint_i):
         out.append("a smooth joint slid 2 min(r) along the joint is switched off at once, and erased (a plain "
                    "contact from then on) at the next record; in-house it is a plain contact from the next step")
+    planes = jw.wall_planes(run)
+    out += jw.notes(run, "a YADE facet (Ig2_Facet_Sphere_ScGeom, the JCFpm law: kn, ks of the run)", planes)
+    if planes and run.joint_friction_deg > run.friction_deg:
+        out.append(f"spheres.joint_friction = {run.joint_friction_deg:g} deg on the joint walls is "
+                   f"{run.friction_deg:g} deg (contact.friction): JCFpm's Ip2 takes the smaller friction angle of "
+                   "the two materials")
+    if planes and np.ptp(np.asarray(run.radii, float)[~jw.dropped(run, planes)]) > 0:
+        out.append("a joint wall's facet stiffness is exact for the mean radius r of the free spheres of its pairs "
+                   "(JCFpm's Ip2 counts a facet as a sphere of twice the sphere's radius): a sphere of radius r' "
+                   "touches it with kn 2 r' / (r + r')")
     return out
+
+
+def wall_facets(run, planes):
+    """(triangles (walls, 3, 3), young (walls,)) of the joint walls (adapters/joint_walls.py) as YADE facets:
+    one triangle per wall holding its rectangle (two facets would give a sphere on their shared edge two
+    contacts), counter-clockwise about the wall normal; young = kn / (2 r) of the mean radius r of the free
+    spheres of its pairs, so that JCFpm's kn of the facet (taken as a sphere of radius 2 r) and a sphere of
+    young kn / r is run.kn."""
+    q = jw.wall_rectangles(run, planes)
+    tri = np.stack([q[:, 0] - 0.5 * (q[:, 1] - q[:, 0]), q[:, 1] + 0.5 * (q[:, 1] - q[:, 0]),
+                    0.5 * (q[:, 2] + q[:, 3]) + (q[:, 3] - q[:, 0])], axis=1)
+    mid = tri.mean(axis=1, keepdims=True)
+    tri = mid + 1.001 * (tri - mid)  # the rectangle's corners strictly inside
+    fixed = np.asarray(run.fixed, bool)
+    young = []
+    for p in planes:
+        k = (np.asarray(run.joint_disc) == p["disc"]) & (fixed[run.joint_i] != fixed[run.joint_j])
+        free = np.where(fixed[run.joint_i[k]], run.joint_j[k], run.joint_i[k])
+        young.append(run.kn / (2.0 * float(np.mean(np.asarray(run.radii, float)[free]))))
+    return tri, np.asarray(young)
 
 
 def write_deck(run: SphereRun, folder, *, dump_bonds=False, detection_factor=1.01, record_positions=None):
@@ -108,10 +140,17 @@ def write_deck(run: SphereRun, folder, *, dump_bonds=False, detection_factor=1.0
     if record_positions is None:
         record_positions = run.n * records <= POS_LIMIT
     shutil.copyfile(SCRIPT, folder / "script.py")
+    planes = jw.wall_planes(run)  # run.extra joint_walls: the fixed sides of joints as facets
     cfg = {"detection_factor": float(detection_factor), "record_positions": bool(record_positions),
-           "dump_bonds": bool(dump_bonds)}
+           "dump_bonds": bool(dump_bonds), "joint_walls": len(planes)}
+    files = ["run.npz", "script.py", "yade.json"]
+    if planes:
+        jw.only_nearest(run, "YADE")
+        tri, young = wall_facets(run, planes)
+        np.savez(folder / "walls.npz", triangles=tri, young=young, dropped=jw.dropped(run, planes))
+        files.append("walls.npz")
     (folder / "yade.json").write_text(json.dumps(cfg, indent=1))
-    return {"files": ["run.npz", "script.py", "yade.json"], "yade": cfg, "approximations": approximations(run)}
+    return {"files": files, "yade": cfg, "joint_walls": len(planes), "approximations": approximations(run)}
 
 
 def export_deck(run: SphereRun, folder, variant=None):
@@ -123,7 +162,16 @@ def check_deck(deck):
     """The deck reader of the registry: the deck's run.npz and yade.json read back and checked (BadFile for a
     broken file) before YADE starts; returns the SphereRun."""
     run = SphereRun.load(Path(deck) / "run.npz")
-    read_config(Path(deck) / "yade.json")
+    cfg = read_config(Path(deck) / "yade.json")
+    if cfg.get("joint_walls", 0):  # the facets of run.extra joint_walls, as the script reads them
+        path = Path(deck) / "walls.npz"
+        if not path.is_file():
+            raise BadFile(path, "missing: the deck's joint walls (run.extra joint_walls), written by `adapters export`")
+        A = Arrays(path, read_npz(path, "a walls.npz"), "a walls.npz")
+        A.missing(["triangles", "young", "dropped"])
+        A.real("triangles", (cfg["joint_walls"], 3, 3))
+        A.real("young", (cfg["joint_walls"],), positive=True)
+        A.boolean("dropped", (run.n,), per="one per sphere of run.npz")
     return run
 
 
@@ -136,6 +184,8 @@ def read_config(path):
         F.number("max_detection_factor", lo=1.0, hi=1.2)
     F.boolean("record_positions", True)
     F.boolean("dump_bonds", False)
+    if "joint_walls" in F.doc:
+        F.number("joint_walls", nonneg=True, integer=True)
     return F.doc
 
 

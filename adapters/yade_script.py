@@ -16,6 +16,12 @@ Runs on YADE's own (system) Python: it imports nothing of this project, only num
 - ``yade_final.npz``   final positions / velocities / bond states (float64), written last;
 - ``yade_bonds.npz``   with ``dump_bonds``: YADE's cohesive pairs and smooth-joint pairs after the bonding step.
 
+Joint walls (yade.json ``joint_walls`` > 0, ``DECK/walls.npz``: run.extra joint_walls, adapters/joint_walls.py):
+each wall is one fixed facet (bodies n, n + 1, ...) of a JCFpmMat of its own (``young`` from walls.npz, poisson
+ks / kn, the joint friction, another material type: never bonded); the ``dropped`` spheres (the rock the walls
+stand for) get groupMask 0, so they meet nothing; their bonds and joint pairs are left out of the pair rule (the
+bonds reported intact).
+
 Steps: the first step is the bonding step (every touching pair bonded by JCFpm's Ip2), after which the
 per-pair rule of run.npz is applied from Python (see adapters/yade.py); the run then advances in O.run chunks
 of record_steps steps and records between chunks (exact step counts, as a PyRunner with iterPeriod would).
@@ -39,9 +45,10 @@ from types import SimpleNamespace
 
 import numpy as np
 from yade import O, utils
-from yade.wrapper import (Body, Bo1_Sphere_Aabb, ForceResetter, Ig2_Sphere_Sphere_ScGeom, InsertionSortCollider,
-                          InteractionLoop, Ip2_JCFpmMat_JCFpmMat_JCFpmPhys, JCFpmMat,
-                          Law2_ScGeom_JCFpmPhys_JointedCohesiveFrictionalPM, NewtonIntegrator, Sphere)
+from yade.wrapper import (Body, Bo1_Facet_Aabb, Bo1_Sphere_Aabb, ForceResetter, Ig2_Facet_Sphere_ScGeom,
+                          Ig2_Sphere_Sphere_ScGeom, InsertionSortCollider, InteractionLoop,
+                          Ip2_JCFpmMat_JCFpmMat_JCFpmPhys, JCFpmMat, Law2_ScGeom_JCFpmPhys_JointedCohesiveFrictionalPM,
+                          NewtonIntegrator, Sphere)
 
 HUGE = 1e300  # stands for an unbreakable bond (inf strength)
 TINY = 1e-300  # a zero tensile strength: JCFpm skips the tension check when FnMax == 0
@@ -82,6 +89,13 @@ def read_run(deck):
     jn = np.asarray(z["joint_normal"], float).reshape(-1, 3)
     if not smooth:
         ji, jj, jn = ji[:0], jj[:0], jn[:0]
+    walls = None
+    if int(cfg.get("joint_walls", 0)):  # the rock behind the walls meets nothing: its joint pairs go, its bonds
+        walls = np.load(os.path.join(deck, "walls.npz"), allow_pickle=False)  # are not looked for
+        drop = np.asarray(walls["dropped"], bool)
+        keep = ~(drop[ji] | drop[jj])
+        ji, jj, jn = ji[keep], jj[keep], jn[keep]
+    bonds_needed = np.ones(len(bi), bool) if walls is None else ~(drop[bi] | drop[bj])
     dt = float(head["dt"])
     R = SimpleNamespace(
         cfg=cfg, head=head, centers=centers, radii=radii, fixed=fixed, n=n, force=force, prescribed=prescribed,
@@ -89,7 +103,8 @@ def read_run(deck):
         gravity=[float(g) for g in z["gravity"]], dt=dt, steps=max(1, int(round(head["duration"] / dt))),
         rec=max(1, int(round(head["record_every"] / dt))), kn=float(head["kn"]), ks=float(head["ks"]),
         tan_phi=math.tan(math.radians(head["friction_deg"])),
-        tan_joint=math.tan(math.radians(head["joint_friction_deg"])), density=float(head["density"]), m=len(bi))
+        tan_joint=math.tan(math.radians(head["joint_friction_deg"])), density=float(head["density"]), m=len(bi),
+        walls=walls, bonds_needed=bonds_needed)
     if n == 0:
         fatal("the run has no spheres")
     if not (np.all(radii > 0) and np.all(np.isfinite(centers))):
@@ -135,6 +150,14 @@ def add_bodies(R):
     if list(ids[:1]) not in ([0], []) or len(ids) != n:
         fatal("unexpected body ids")
     del bodies
+    if R.walls is not None:
+        for k in np.flatnonzero(R.walls["dropped"]).tolist():
+            O.bodies[k].groupMask = 0  # meets no body
+        for tri, young in zip(R.walls["triangles"], R.walls["young"]):
+            mat = JCFpmMat(type=2, young=float(young), poisson=R.ks / R.kn, frictionAngle=math.atan(R.tan_joint),
+                           density=R.density)
+            O.materials.append(mat)
+            O.bodies.append(utils.facet([tuple(map(float, p)) for p in tri], material=mat, fixed=True))
     # constant sphere forces: permanent forces (kept when ForceResetter clears the others each step)
     loaded = np.flatnonzero(np.any(R.force != 0.0, axis=1) & ~R.fixed & ~R.prescribed)
     for k in loaded.tolist():
@@ -158,13 +181,14 @@ def add_engines(R):
     f = min(f, float(cfg.get("max_detection_factor", 1.2)))
     bo1 = Bo1_Sphere_Aabb(aabbEnlargeFactor=f)
     ig2 = Ig2_Sphere_Sphere_ScGeom(interactionDetectionFactor=f)
+    facets = ([Bo1_Facet_Aabb()], [Ig2_Facet_Sphere_ScGeom()]) if R.walls is not None else ([], [])
     # neverErase: a smooth-joint pair that opens for a moment keeps its joint status when it closes again
     # (erased, it would come back as a plain contact that interlocks across the joint)
     law = Law2_ScGeom_JCFpmPhys_JointedCohesiveFrictionalPM(smoothJoint=True, neverErase=True, recordCracks=False)
     O.engines = [
         ForceResetter(),
-        InsertionSortCollider([bo1]),
-        InteractionLoop([ig2], [Ip2_JCFpmMat_JCFpmMat_JCFpmPhys(cohesiveTresholdIteration=1)], [law]),
+        InsertionSortCollider([bo1] + facets[0]),
+        InteractionLoop([ig2] + facets[1], [Ip2_JCFpmMat_JCFpmMat_JCFpmPhys(cohesiveTresholdIteration=1)], [law]),
         NewtonIntegrator(gravity=R.gravity, damping=float(R.head["local_damping"])),
     ]
     O.dt = R.dt
@@ -185,8 +209,8 @@ class Records:
 
     def positions(self, vel=True):
         n = self.R.n
-        p = np.array([b.state.pos for b in O.bodies], float).reshape(n, 3)
-        v = np.array([b.state.vel for b in O.bodies], float).reshape(n, 3) if vel else None
+        p = np.array([O.bodies[k].state.pos for k in range(n)], float).reshape(n, 3)
+        v = np.array([O.bodies[k].state.vel for k in range(n)], float).reshape(n, 3) if vel else None
         return p, v
 
     def write_series(self):
@@ -221,6 +245,8 @@ def apply_pair_rule(R):
     bodies_ = O.bodies
     for I in O.interactions:
         a, c = I.id1, I.id2
+        if a >= n or c >= n:
+            continue  # a sphere on a joint wall's facet: JCFpm's Ip2 gave it the wall's law
         lo, hi = (a, c) if a < c else (c, a)
         key = lo * n + hi
         ph = I.phys
@@ -296,9 +322,9 @@ def retire_joints(joint_alive):
 def bond_states(R, bond_of):
     """(m,) bool: the bonds of the bond list still cohesive in YADE."""
     n = R.n
-    state = np.zeros(R.m, bool)
+    state = ~R.bonds_needed  # the bonds of the rock behind joint walls: never looked at, intact
     for I in O.interactions:
-        if I.phys.isCohesive:
+        if I.phys.isCohesive and I.id1 < n and I.id2 < n:
             a, c = I.id1, I.id2
             k = bond_of.get(min(a, c) * n + max(a, c))
             if k is not None:
@@ -369,12 +395,13 @@ def main(deck, out):
     bo1.aabbEnlargeFactor = -1.0
     ig2.interactionDetectionFactor = -1.0
     bond_of, found_b, found_j, unbonded, apart = apply_pair_rule(R)
-    missing_b = int(m - found_b.sum())
+    missing_b = int(np.sum(~found_b & R.bonds_needed))
     missing_j = int(len(ji) - found_j.sum())
     setup = {"detection_factor": f, "bonds": m, "bonds_found": int(found_b.sum()), "bonds_missing": missing_b,
              "joints": int(len(ji)), "joints_found": int(found_j.sum()), "joints_missing": missing_j,
              "unbonded_contacts": unbonded - int(found_j.sum()) - len(apart), "materials": len(mats),
              "loaded": int(len(loaded)), "prescribed": int(R.prescribed.sum()),
+             "joint_walls": 0 if R.walls is None else int(len(R.walls["young"])),
              "bonding_step_s": t_bond,
              "setup_s": time.time() - t_start}
     with open(os.path.join(out, "yade_setup.json"), "w") as fh:

@@ -19,7 +19,10 @@ and compares it with a reference computed here, independently of every engine:
   intersection grew in the last quarter of the run; the free spheres that fewer than three bonds hold are left
   out, they swing for ever). Reference: Hoek & Bray's critical friction (dda.hoekbray); the DDA block wedge
   (dda.wedge) is a row. LIGGGHTS-PUBLIC, which has no smooth joint, runs the wedge on mesh walls in place of the
-  fixed rock, as one rigid clump, with fix viscous (liggghts_wedge, adapters/liggghts_walls.py). `python -m cases.bench.wedge` gives the error and cost against the sphere radius.
+  fixed rock, as one rigid clump, with fix viscous (liggghts_wedge, adapters/liggghts_walls.py). wedge_walls: the
+  same bisection in-house and in YADE with the rock below each joint as a joint wall (run.extra joint_walls =
+  "nearest", adapters/joint_walls.py: an in-house slab, a YADE facet; walled_wedge). `python -m cases.bench.wedge`
+  gives the error and cost against the sphere radius.
 - rocking: a block cut by a horizontal smooth joint rocks under a sideways push at its top; the heel of the
   joint opens in the first swing and closes again, local damping brings it to rest. In-house and YADE only (no
   smooth joint in LIGGGHTS-PUBLIC), each against the other: the upper part's mean vertical displacement at the
@@ -72,6 +75,7 @@ G = 9.81
 TOLERANCE = 0.05  # the agreement the table checks: 5 % of the reference
 WEDGE_REST = 1e-4  # a wedge trial that moves less than this many radii in its last quarter has come to rest
 WEDGE_LIGGGHTS_TAU = 0.1  # [s] the LIGGGHTS wedge's fix viscous: gamma = sphere mass / tau (liggghts_wedge)
+WEDGE_WALL_T = 2.4  # [s] a trial of the wedge on joint walls (walled_wedge): it settles onto them for about 1.5 s
 
 
 @dataclass
@@ -337,22 +341,8 @@ def rigid_core(run, bonds=3):
 
 def without(run, keep):
     """A copy of the SphereRun `run` with the spheres `keep` ((n,) bool) alone, and the bonds, joints and cut pairs
-    between them (their order kept, sphere indices renumbered)."""
-    new = np.full(run.n, -1, np.int64)
-    new[keep] = np.arange(int(keep.sum()))
-    bond = keep[run.bond_i] & keep[run.bond_j]
-    joint = keep[run.joint_i] & keep[run.joint_j]
-    cut = keep[run.cut_i] & keep[run.cut_j]
-    return replace(
-        run, centers=np.asarray(run.centers)[keep], radii=np.asarray(run.radii)[keep],
-        colour=np.asarray(run.colour)[keep], fixed=np.asarray(run.fixed, bool)[keep],
-        bond_i=new[run.bond_i[bond]], bond_j=new[run.bond_j[bond]],
-        **{k: np.asarray(getattr(run, k))[bond] for k in ("bond_len0", "bond_kn", "bond_ks", "bond_ft", "bond_fs",
-                                                           "bond_zeta")},
-        joint_i=new[run.joint_i[joint]], joint_j=new[run.joint_j[joint]],
-        joint_disc=np.asarray(run.joint_disc)[joint], joint_normal=np.asarray(run.joint_normal).reshape(-1, 3)[joint],
-        cut_i=new[run.cut_i[cut]], cut_j=new[run.cut_j[cut]], force=run.force[keep],
-        prescribed=run.prescribed[keep], velocity=run.velocity[keep])
+    between them (their order kept, sphere indices renumbered): SphereRun.subset."""
+    return run.subset(keep)
 
 
 def wedge_run(path=None, core=True):
@@ -375,16 +365,19 @@ def wedge_slides(s, run, geo):
     return s[2] - s[1] > WEDGE_REST * float(np.min(run.radii))
 
 
-def wedge_trial(engine, base, phi, work, timeout=None, moving=wedge_slides):
+def wedge_trial(engine, base, phi, work, timeout=None, moving=wedge_slides, walls=False):
     """One trial of the wedge run `base` (wedge_run) at joint friction `phi` [deg] in `engine`: (slides,
-    displacement along the line of intersection at T/2, 3T/4, T) with `moving(s, run, geo)` deciding."""
+    displacement along the line of intersection at T/2, 3T/4, T) with `moving(s, run, geo)` deciding. `walls`:
+    the rock below the joints as joint walls (walled_wedge; LIGGGHTS always runs the wedge so)."""
     geo, line = _wedge_line(WEDGE)
     wedge = ~base.fixed
     run = replace(base, joint_friction_deg=float(phi))
     variant = None
     if engine == "liggghts":
         run, variant = liggghts_wedge(run), "clumps"
-    wk = Path(work) / f"wedge_{engine}_{phi:.4f}"
+    elif walls:
+        run = walled_wedge(run)
+    wk = Path(work) / f"wedge_{engine}{'_walls' if walls else ''}_{phi:.4f}"
     wk.mkdir(parents=True, exist_ok=True)
     run.save(wk / "run.npz")
     res = run_engine(engine, wk / "run.npz", wk, timeout, run=run, variant=variant)
@@ -404,22 +397,31 @@ def liggghts_wedge(run):
     quarter at tan phi = (1 - delta) tan phi_c, so a trial slides from delta = 4e-4 (WEDGE_REST). Measured: the
     onset's bracket 19.692-19.707 deg at tau = 0.05, 0.1 and 0.2 s; undamped +0.51 %."""
     m = run.density * 4.0 / 3.0 * math.pi * float(np.mean(np.asarray(run.radii) ** 3))
-    return replace(run, extra={**run.extra, "liggghts_joint_walls": True, "liggghts_wall_radii": True,
-                               "liggghts_viscous": m / WEDGE_LIGGGHTS_TAU})
+    return replace(run, extra={**run.extra, "joint_walls": "pairs", "liggghts_viscous": m / WEDGE_LIGGGHTS_TAU})
+
+
+def walled_wedge(run):
+    """The wedge run on joint walls in YADE or in-house (run.extra joint_walls = "nearest", adapters/joint_walls.py):
+    the rock below each joint is a plane wall (a YADE facet, an in-house slab) with the joint friction, touching the
+    wedge's nearest sphere; the bonded wedge keeps its radii. It first rests on its lowest spheres and settles
+    onto the walls (0.14 m along the line of intersection at r = 0.5, 1.5 s; at 1.2 s per trial it was still
+    settling and both 0.995 and 1.005 x phi_c moved), so a trial runs WEDGE_WALL_T."""
+    return replace(run, duration=WEDGE_WALL_T, record_every=WEDGE_WALL_T / 48,
+                   extra={**run.extra, "joint_walls": "nearest"})
 
 
 def wedge_onset(engine, work, timeout=None, path=None, bracket=(0.95, 1.05), iterations=7, core=True,
-                moving=wedge_slides):
+                moving=wedge_slides, walls=False):
     """Bisection of the sphere wedge's joint friction in `engine`: starts from `bracket` x Hoek & Bray's critical
     angle (widened while both ends agree), then `iterations` halvings; each trial is wedge_trial (`moving`
     decides). Returns a dict: lo (slides), hi (holds), found (False when no bracket was found: lo and hi then
     name the last two ends tried), trials [(phi, slides, s)], the run (its spheres) and the critical angle
-    phi_c."""
+    phi_c. `walls`: on joint walls (wedge_trial)."""
     base = wedge_run(path, core)
     trials = []
 
     def slides(phi):
-        moved, s = wedge_trial(engine, base, phi, work, timeout, moving)
+        moved, s = wedge_trial(engine, base, phi, work, timeout, moving, walls)
         trials.append((float(phi), moved, s))
         return moved
 
@@ -444,27 +446,31 @@ def wedge_onset(engine, work, timeout=None, path=None, bracket=(0.95, 1.05), ite
 
 
 def case_wedge(engines, work, say, timeout, iterations=7):
-    """The sphere wedge's onset by bisection of the joint friction (wedge_onset) in every engine."""
+    """The sphere wedge's onset by bisection of the joint friction (wedge_onset) in every engine, on smooth joints
+    (LIGGGHTS: on walls) and, in-house and in YADE, also on joint walls (walled_wedge: row wedge_walls)."""
     rows = []
     phi_c = wedge_reference(WEDGE).critical_friction
-    for eng in engines:
+    runs = [(eng, False) for eng in engines] + [(eng, True) for eng in engines if eng in ("dda", "yade")]
+    for eng, walls in runs:
         t0 = time.perf_counter()
-        b = wedge_onset(eng, work, timeout, iterations=iterations)
+        b = wedge_onset(eng, work, timeout, iterations=iterations, walls=walls)
         lo, hi, run = b["lo"], b["hi"], b["run"]
+        case = "wedge_walls" if walls else "wedge"
+        extra = _wedge_note(eng, walls)
         if b["found"]:
             got = 0.5 * (lo + hi)
             err = got / phi_c - 1.0
             note = (f"r = {float(np.min(run.radii)):g} m, {int((~run.fixed).sum())} free spheres, bracket "
                     f"{lo:.3f}-{hi:.3f}, {len(b['trials'])} runs")
-            if _wedge_note(eng):
-                note += "; " + _wedge_note(eng)
-            rows.append(Row("wedge", eng, f"{got:.3f} deg", f"{phi_c:.3f} deg (Hoek & Bray)", f"{100 * err:+.2f} %",
+            if extra:
+                note += "; " + extra
+            rows.append(Row(case, eng, f"{got:.3f} deg", f"{phi_c:.3f} deg (Hoek & Bray)", f"{100 * err:+.2f} %",
                             abs(err) <= TOLERANCE, time.perf_counter() - t0, note=note,
                             value=got, ref_value=phi_c, err_value=err))
         else:
-            rows.append(Row("wedge", eng, f"{b['where']} at {lo:.1f} and {hi:.1f} deg",
+            rows.append(Row(case, eng, f"{b['where']} at {lo:.1f} and {hi:.1f} deg",
                             f"{phi_c:.3f} deg (Hoek & Bray)", "no onset found", False, time.perf_counter() - t0,
-                            note=_wedge_note(eng), ref_value=phi_c))
+                            note=extra, ref_value=phi_c))
         if say:
             say(_line(rows[-1]))
     if "dda" in engines:
@@ -472,10 +478,13 @@ def case_wedge(engines, work, say, timeout, iterations=7):
     return rows
 
 
-def _wedge_note(engine):
+def _wedge_note(engine, walls=False):
     if engine == "liggghts":
         return ("no smooth joint in LIGGGHTS-PUBLIC: the rock below each joint is a mesh wall (fix wall/gran, joint "
                 "friction), the wedge a rigid clump, fix viscous m / 0.1 s")
+    if walls:
+        return (f"the rock below each joint a {'facet' if engine == 'yade' else 'slab'} with the joint friction "
+                f"(joint_walls = nearest), {WEDGE_WALL_T:g} s per run")
     return ""
 
 
