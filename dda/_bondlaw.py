@@ -125,6 +125,13 @@ def full_bonds(mo, sp, bonds, pl, dt, t, res):
     force = mo.force
     torque = mo.torque
     BB = bonds.rows
+    full = bonds.full
+    intact = bonds.intact
+    bi = bonds.i
+    bj = bonds.j
+    m = sp.m
+    fixed = sp.fixed
+    kin = sp.kin
     e_bond = 0.0
     nint = 0
     nbroken = 0
@@ -132,12 +139,12 @@ def full_bonds(mo, sp, bonds, pl, dt, t, res):
     # added to its row
     ci = -1
     g0 = g1 = g2 = h0 = h1 = h2 = 0.0
-    for kk in range(bonds.full.shape[0]):
-        k = bonds.full[kk]
-        if not bonds.intact[k]:
+    for kk in range(full.shape[0]):
+        k = full[kk]
+        if not intact[k]:
             continue
-        i = bonds.i[k]
-        j = bonds.j[k]
+        i = bi[k]
+        j = bj[k]
         if i != ci:
             if ci >= 0:
                 force[ci, 0] -= g0
@@ -195,7 +202,7 @@ def full_bonds(mo, sp, bonds, pl, dt, t, res):
         uu = u0 * u0 + u1 * u1 + u2 * u2
         if fn > BB[k, B_FT] or BB[k, B_KS] * BB[k, B_KS] * uu > BB[k, B_FS] * BB[k, B_FS]:  # ks |u| > fs
             # breaks: its spring energy (last step's) leaves the system; the pair joins the pair list
-            bonds.intact[k] = False
+            intact[k] = False
             bonds.brk[k] = t
             BB[k, B_FN] = 0.0
             res[1] += 0.5 * BB[k, B_KN] * stretch * stretch + 0.5 * BB[k, B_KS] * uu
@@ -214,7 +221,7 @@ def full_bonds(mo, sp, bonds, pl, dt, t, res):
         # force on j: -fn n - ks u (+ viscous damping on the normal and shear relative velocity)
         cdn = 0.0
         if BB[k, B_ZETA] > 0.0:
-            meff = pair_meff(i, j, sp.m, sp.fixed, sp.kin)
+            meff = pair_meff(i, j, m, fixed, kin)
             cdn = 2.0 * BB[k, B_ZETA] * np.sqrt(BB[k, B_KN] * meff)
             cds = 2.0 * BB[k, B_ZETA] * np.sqrt(BB[k, B_KS] * meff)
             res[2] += (cdn * vn * vn + cds * ((vr0 - vn * nx) ** 2 + (vr1 - vn * ny) ** 2
