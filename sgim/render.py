@@ -174,8 +174,19 @@ class Frame:
         cam.up = tuple(up)
         cam.parallel_scale = s * self.H / 2
         self.pl.renderer.ResetCameraClippingRange()
-        self.scale, self._d, self._right, self._up = s, d, right, up
+        self.scale, self._d, self._right, self._up, self._focal = s, d, right, up, focal
         return s
+
+    def project(self, points):
+        """Window coordinates x, y [pixels from the lower left corner] and depth t [m along the view, growing away
+        from the eye] of `points` (n x 3) through the camera of :meth:`fit`, one rounding per product and sum
+        (numpy's elementwise operations: the same bits on every CPU)."""
+        p = [np.asarray(points, float)[:, a] - self._focal[a] for a in range(3)]
+        r, u, d = self._right, self._up, self._d
+        x = (p[0] * r[0] + p[1] * r[1] + p[2] * r[2]) / self.scale + self.W / 2
+        y = (p[0] * u[0] + p[1] * u[1] + p[2] * u[2]) / self.scale + self.H / 2
+        t = -(p[0] * d[0] + p[1] * d[1] + p[2] * d[2])
+        return x, y, t
 
     def axes(self, lo, hi):
         """The box lo..hi in grey with three of its edges as axes (the lower front edges along x and y, the left
@@ -411,13 +422,67 @@ def _draw_cut(frame, cuts, lo, hi, pad):
     return True
 
 
+# where a sprite's centre may lie off the computed one [pixels]: 0.02 plus the float32 rounding of the coordinates
+# VTK draws (a few units in the last place of the largest coordinate); depth likewise [m]
+SIGHT_EPS_PX = 0.02
+FLOAT32_ULPS = 4 * 2.0 ** -23
+
+
+def sight_tolerances(frame, centers, px):
+    """R [pixels], eps [pixels], bulge [m] and tol [m] of :func:`in_sight` for sprites of `px` pixels: eps is
+    SIGHT_EPS_PX plus the float32 rounding of the largest coordinate on screen, tol a thousandth of the bulge plus
+    that rounding plus a millionth of the model's size (the depth buffer's resolution)."""
+    big = float(np.abs(centers).max()) * FLOAT32_ULPS if len(centers) else 0.0
+    bulge = px * frame.scale
+    eps = SIGHT_EPS_PX + big / frame.scale
+    tol = 1e-3 * bulge + big + 1e-6 * (float(np.ptp(centers, axis=0).max()) if len(centers) else 0.0)
+    return px / 2.0, eps, bulge, tol
+
+
+def in_sight(frame, centers, solid, ghost, px):
+    """The opaque spheres `solid` and translucent `ghost` (indices into `centers`) that can show in the picture,
+    drawn as point sprites of `px` pixels through the camera of `frame` (Frame.fit).
+
+    VTK draws a sprite as a disc of radius R = px / 2 pixels whose depth at distance d from its centre is
+    t - bulge sqrt(1 - (d / R)^2), bulge = px x the scale in metres per pixel (twice the sprite's radius: VTK's
+    gl_FragDepth for points drawn as spheres). A sprite is left out when at every pixel cell its disc reaches, an
+    opaque sprite holding that whole cell is certainly in front of it (sgim/_render.py, front_depths and
+    reaches_front): none of its samples would pass the depth test, and the picture is the same pixel for pixel
+    (tests/test_render_sight.py compares both pictures). Only the opaque sprites hide; translucent ones are
+    hidden by them alone. What is left is about the spheres on the outer surface of the body and on the cut-away
+    planes, a few layers deep, whatever the number inside."""
+    from ._render import front_depths, reaches_front
+
+    if not len(solid):
+        return solid, ghost
+    R, eps, bulge, tol = sight_tolerances(frame, centers, px)
+    x, y, t = frame.project(centers[solid])
+    buf = front_depths(x, y, t, R, eps, bulge, frame.W, frame.H)
+    solid = _with_extremes(solid, centers, reaches_front(x, y, t, buf, R, eps, bulge, tol))
+    if len(ghost):
+        gx, gy, gt = frame.project(centers[ghost])
+        ghost = _with_extremes(ghost, centers, reaches_front(gx, gy, gt, buf, R, eps, bulge, tol))
+    return solid, ghost
+
+
+def _with_extremes(idx, centers, keep):
+    """idx[keep] and the spheres of idx with the least and the largest coordinate along each axis: VTK rounds the
+    points it draws to float32 about the middle of their bounds, so keeping the bounds keeps the same rounding
+    (and the picture the same bit for bit far from the origin too)."""
+    c = centers[idx]
+    keep = keep.copy()
+    keep[np.argmin(c, axis=0)] = True
+    keep[np.argmax(c, axis=0)] = True
+    return idx[keep]
+
+
 def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_away=(), width=1600, height=1100,
            title=None):
     """model.png: the spheres in the paper's colours (intact, red fault, green / blue joint sides) seen from the
     -x, -y side (azimuth -150 degrees) 35 degrees above the horizon through a parallel camera fitted to the
     model, with a legend of the colours drawn, axes in metres, a scale bar, and the cut-away region (a sphere is
-    cut away when it satisfies every condition of `cut_away`) outlined in orange. Only numpy work per sphere:
-    the spheres are point sprites of their true size on screen."""
+    cut away when it satisfies every condition of `cut_away`) outlined in orange. The spheres are point sprites
+    of their true size on screen, and only those that can show are drawn (:func:`in_sight`)."""
     import pyvista as pv
 
     cuts = parse_cuts(cut_away)
@@ -441,6 +506,8 @@ def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_a
     frame.axes(lo, hi)
     r = float(np.median(model.radii)) if model.n else 1.0
     px = float(np.clip(2.0 * r / s, 1.5, 255.0))  # the median sphere's diameter on screen
+    selected = len(solid) + len(ghost)
+    solid, ghost = in_sight(frame, model.centers, solid, ghost, px)
     if len(solid):
         cloud = pv.PolyData(model.centers[solid])
         cloud["rgb"] = (COLOURS[model.colour[solid]] * 255).astype(np.uint8)
@@ -456,6 +523,7 @@ def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_a
         frame.add_legend_entry("cut away:\n" + " and ".join(e.replace(" ", "") for e in cut_away), CUT_COLOUR)
     frame.save(path)
     info = {"drawn": int(len(solid) + len(ghost)), "selected": int(len(idx)),
+            "hidden": int(selected - len(solid) - len(ghost)),
             "legend": [label for label, _ in frame.legend], "scale_bar_m": frame.scale_bar_m}
     frame.close()
     return info

@@ -41,7 +41,7 @@ DEFAULTS = {
     "cavity[].segments": 48,  # facets around a swept or ellipsoid cavity (a box has its own 12 triangles)
     "bonds.rule": "colour",
     "bonds.tolerance": 1e-3,  # relative to ri + rj
-    "output.formats": OUTPUT_FORMATS,  # npz is always written
+    "output.formats": ("npz", "vtu", "png"),  # npz is always written; the PFC-style text ("txt") when asked for
     "render.hide_intact": False,
     "render.translucent": False,
     "render.cut_away": (),
