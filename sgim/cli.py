@@ -64,15 +64,17 @@ def cmd_build(args):
             from .render import render
 
             rs = scene.render
-            render(model, tmp / "model.png", hide_intact=rs.hide_intact, translucent=rs.translucent,
-                   cut_away=rs.cut_away, width=rs.width, height=rs.height, title=scene.name)
-            timer.lap("render", str(out / "model.png"))
+            picture = render(model, tmp / "model.png", hide_intact=rs.hide_intact, translucent=rs.translucent,
+                             cut_away=rs.cut_away, width=rs.width, height=rs.height, title=scene.name)
+            timer.lap("render", f"{out / 'model.png'} ({picture['drawn']} spheres drawn, {picture['hidden']} hidden)")
         if getattr(scene, "dfn", None) is not None:
             from .dfn import network_for, write_network
 
             write_network(network_for(scene), tmp)
             timer.lap("write dfn", str(out / "network.csv"))
         info = summary(model, timer.t)
+        if "png" in formats:
+            info["picture"] = {k: picture[k] for k in ("selected", "drawn", "hidden")}
         info["timings_s"]["total"] = round(time.perf_counter() - t0, 4)
         (tmp / "summary.json").write_text(json.dumps(info, indent=2))
     if args.json:
