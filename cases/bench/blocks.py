@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cases import SCENES
+from sgim.machine import machine_line
 
 FABRIC = """
 [blocks]
@@ -124,6 +125,8 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.child:
         return one(args.child)
+    print(machine_line())
+    print()
     print("| case | blocks | cutting s | peak MB | volume rel. error | smallest / median / largest m3 | < min_volume |")
     print("|---|---|---|---|---|---|---|")
     for name in [args.only] if args.only else sorted(CASES, reverse=True):
