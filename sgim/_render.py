@@ -13,6 +13,14 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _cells(xc, yc, half, W, H):
+    """The pixel cells i0..i1, j0..j1 of a W x H picture that the square of half-side `half` about (xc, yc)
+    meets."""
+    return (max(int(np.floor(xc - half)), 0), min(int(np.floor(xc + half)), W - 1),
+            max(int(np.floor(yc - half)), 0), min(int(np.floor(yc + half)), H - 1))
+
+
 @njit(cache=True)
 def front_depths(x, y, t, R, eps, bulge, W, H):
     """(H, W) array: per pixel cell, the least depth that a sprite holding the whole cell (every point of the
@@ -25,10 +33,7 @@ def front_depths(x, y, t, R, eps, bulge, W, H):
     inner2 = inner * inner
     for k in range(len(x)):
         xk, yk, tk = x[k], y[k], t[k]
-        i0 = max(int(np.floor(xk - inner)), 0)
-        i1 = min(int(np.floor(xk + inner)), W - 1)
-        j0 = max(int(np.floor(yk - inner)), 0)
-        j1 = min(int(np.floor(yk + inner)), H - 1)
+        i0, i1, j0, j1 = _cells(xk, yk, inner, W, H)
         for j in range(j0, j1 + 1):
             dy = max(abs(j - yk), abs(j + 1.0 - yk))
             if dy * dy > inner2:
@@ -55,10 +60,7 @@ def reaches_front(x, y, t, buf, R, eps, bulge, tol):
     outer2 = outer * outer
     for k in range(len(x)):
         xk, yk, tk = x[k], y[k], t[k]
-        i0 = max(int(np.floor(xk - outer)), 0)
-        i1 = min(int(np.floor(xk + outer)), W - 1)
-        j0 = max(int(np.floor(yk - outer)), 0)
-        j1 = min(int(np.floor(yk + outer)), H - 1)
+        i0, i1, j0, j1 = _cells(xk, yk, outer, W, H)
         for j in range(j0, j1 + 1):
             dy = 0.0 if j <= yk <= j + 1.0 else min(abs(j - yk), abs(j + 1.0 - yk))
             for i in range(i0, i1 + 1):

@@ -10,20 +10,9 @@ import numpy as np
 import pytest
 
 import sgim.render as render_mod
-from sgim.model import SphereModel
 from sgim.render import Frame, in_sight, sight_tolerances
 from sgim.scene import scene_from_dict
-
-
-def _model(centers, radii, colour):
-    n = len(centers)
-    z = np.zeros(0)
-    return SphereModel(centers=np.asarray(centers, float), radii=np.asarray(radii, float),
-                       colour=np.asarray(colour, np.int8), colour_source=np.full(n, -1, np.int32),
-                       bonds=np.zeros((0, 2), np.int64), bonded=np.zeros(0, bool), cut_by=np.zeros(0, np.int32),
-                       member_sphere=np.zeros(0, np.int64), member_disc=np.zeros(0, np.int32),
-                       member_kind=np.zeros(0, np.int8), member_offset=z, disc_centre=np.zeros((0, 3)),
-                       disc_normal=np.zeros((0, 3)), disc_radius=z, disc_thickness=z, disc_name=[])
+from test_pictures_paraview import _model
 
 
 def _block(n=10, seed=5, offset=0.0):
