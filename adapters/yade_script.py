@@ -36,6 +36,7 @@ the velocity it has, whatever the forces, and leaves it out of utils.kineticEner
 Lines starting with ``FATAL:`` carry the reason of a deliberate failure (the runner surfaces them);
 ``PROGRESS`` lines report the run's advance.
 """
+import itertools
 import json
 import math
 import os
@@ -209,8 +210,9 @@ class Records:
 
     def positions(self, vel=True):
         n = self.R.n
-        p = np.array([O.bodies[k].state.pos for k in range(n)], float).reshape(n, 3)
-        v = np.array([O.bodies[k].state.vel for k in range(n)], float).reshape(n, 3) if vel else None
+        spheres = list(itertools.islice(O.bodies, n))  # the spheres are bodies 0..n-1, joint-wall facets after
+        p = np.array([b.state.pos for b in spheres], float).reshape(n, 3)
+        v = np.array([b.state.vel for b in spheres], float).reshape(n, 3) if vel else None
         return p, v
 
     def write_series(self):
