@@ -10,6 +10,11 @@ gives the medians of the repeats: the packing and its statistics (meta.packing.t
 writing of each file, the picture (sgim/render.py: how many spheres it drew, and how many it left out because
 they cannot show), and the wall time of the child process (interpreter start and imports included).
 
+The picture alone (``--picture``): sgim.render.render of n^3 spheres on a cubic grid filling the 10 m cube,
+each moved by up to a tenth of the spacing (radius 0.55 spacings: an opaque block), n^3 = 10^5, 10^6 and 10^7, in
+this process after one warm-up picture (pyvista and the kernels loaded): medians of the repeats, the spheres
+drawn and left out, and the same with every sphere drawn for the first two sizes (the cost before the selection).
+
 ``--repo PATH`` runs the sgim of another checkout (``git worktree add --detach /tmp/before REV``) with the same
 scenes: the figures before a change, in the same run conditions.
 
@@ -18,6 +23,7 @@ Run
     .venv/bin/python -m cases.bench.picture              # both cubes, 3 repeats (several minutes)
     .venv/bin/python -m cases.bench.picture --quick      # the 4.5 m cube only
     .venv/bin/python -m cases.bench.picture --repo /tmp/before --json before.json
+    .venv/bin/python -m cases.bench.picture --picture    # the picture alone, 10^5 to 10^7 spheres
 
 Markdown tables go to stdout, progress lines to stderr.
 """
@@ -102,6 +108,68 @@ def run_case(repo, tmp, name, side, repeats):
     return row
 
 
+def grid_model(n, side=10.0, seed=1):
+    """n^3 spheres on a cubic grid filling a cube of `side` m, moved by up to a tenth of the spacing, radius 0.55
+    spacings (neighbours overlap: an opaque block), as a SphereModel without bonds."""
+    import numpy as np
+
+    from sgim.model import SphereModel
+
+    h = side / n
+    g = (np.arange(n) + 0.5) * h
+    c = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    c += np.random.default_rng(seed).uniform(-0.1 * h, 0.1 * h, c.shape)
+    m = len(c)
+    z = np.zeros(0)
+    return SphereModel(centers=c, radii=np.full(m, 0.55 * h), colour=np.zeros(m, np.int8),
+                       colour_source=np.full(m, -1, np.int32), bonds=np.zeros((0, 2), np.int64),
+                       bonded=np.zeros(0, bool), cut_by=np.zeros(0, np.int32), member_sphere=np.zeros(0, np.int64),
+                       member_disc=np.zeros(0, np.int32), member_kind=np.zeros(0, np.int8), member_offset=z,
+                       disc_centre=np.zeros((0, 3)), disc_normal=np.zeros((0, 3)), disc_radius=z,
+                       disc_thickness=z, disc_name=[])
+
+
+def picture_rows(sizes, repeats, every_up_to):
+    """The picture alone of grid_model(n) for each n: (n^3, drawn, hidden, median s, median s drawing every
+    sphere or None)."""
+    import sgim.render as render_mod
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench_picture_") as d:
+        render_mod.render(grid_model(10), Path(d) / "warm.png")
+        for n in sizes:
+            model = grid_model(n)
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                info = render_mod.render(model, Path(d) / "p.png", title="block")
+                times.append(time.perf_counter() - t0)
+            every = None
+            if n ** 3 <= every_up_to:
+                keep = render_mod.in_sight
+                render_mod.in_sight = lambda frame, centers, solid, ghost, px: (solid, ghost)
+                try:
+                    every = []
+                    for _ in range(repeats):
+                        t0 = time.perf_counter()
+                        render_mod.render(model, Path(d) / "e.png", title="block")
+                        every.append(time.perf_counter() - t0)
+                finally:
+                    render_mod.in_sight = keep
+                every = statistics.median(every)
+            say(f"picture of {n ** 3} spheres: {statistics.median(times):.2f} s, {info['drawn']} drawn")
+            rows.append((n ** 3, info["drawn"], info["hidden"], statistics.median(times), every))
+    return rows
+
+
+def picture_table(rows):
+    lines = ["| spheres | drawn | left out | picture | every sphere drawn |", "|---|---|---|---|---|"]
+    for n, drawn, hidden, t, every in rows:
+        lines.append(f"| {n:,} | {drawn:,} | {hidden:,} | {t:.2f} s | "
+                     f"{'-' if every is None else f'{every:.2f} s'} |".replace(",", " "))
+    return "\n".join(lines)
+
+
 def table(rows):
     head = ["case", "spheres", "drawn"] + [c for c, _ in COLUMNS] + ["whole build"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -120,7 +188,21 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=3, help="counted builds per case (default 3; medians)")
     ap.add_argument("--repo", default=str(REPO), help="the checkout whose sgim is run (default: this one)")
     ap.add_argument("--json", help="also write the results to this JSON file")
+    ap.add_argument("--picture", action="store_true",
+                    help="the picture alone of 10^5, 10^6 and 10^7 spheres in this process (instead of the builds)")
     args = ap.parse_args(argv)
+    if args.picture:
+        sizes = (46, 100) if args.quick else (46, 100, 215)
+        rows = picture_rows(sizes, args.repeats, every_up_to=1_100_000)
+        print(f"sgim.render.render of an opaque block of n^3 spheres in a 10 m cube, 1600 x 1100, medians of "
+              f"{args.repeats}; load average {os.getloadavg()[0]:.1f}")
+        print(machine_line())
+        print()
+        print(picture_table(rows))
+        if args.json:
+            Path(args.json).write_text(json.dumps({"machine": machine_info(), "load_average": os.getloadavg(),
+                                                   "picture": rows}, indent=2))
+        return
     repo = Path(args.repo).resolve()
     if not (repo / "sgim" / "cli.py").is_file():
         raise SystemExit(f"--repo = {args.repo!r}: no sgim/cli.py there")
