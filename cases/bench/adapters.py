@@ -198,7 +198,9 @@ def bench_deck(packing, args, skip, tmp):
     # in-house and LIGGGHTS alternate, repeat by repeat, so that both see the same machine load
     engines = [e for e in ("dda", "dda-central", "liggghts") if e not in skip]
     crun = central_run(run)
-    decks = liggghts_decks(run, tmp) if "liggghts" in engines else None
+    # the LIGGGHTS decks of each packing in a folder of their own (export refuses a folder holding a deck)
+    (tmp / packing).mkdir()
+    decks = liggghts_decks(run, tmp / packing) if "liggghts" in engines else None
     walls = {e: [] for e in engines}
     cpus = {e: [] for e in engines}
     info = {}
