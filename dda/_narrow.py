@@ -29,6 +29,7 @@ from numba import njit
 from ._contact import point_force
 from ._deform import add_strain_force, body_point, point_velocity
 from ._fcp import MAXP, contact_points, fcp, gap_along, polygon_area, sat_search
+from ._kinds import intact_share, law_face, near_history, point_row
 from ._kinematics import omega, quat_matrix
 from ._state import (C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE, LAW_COH, LAW_KN, LAW_KS,
                      LAW_TANPHI, LAW_TEN, LAW_ZETA, T_DAMPING, T_ELASTIC, T_FRICTION, T_MAXDEPTH)
@@ -234,9 +235,11 @@ def _store_point(pid_new, us_new, state_new, bond_new, pos_new, fn_new, depth_ne
 
 
 @njit(cache=True, inline="always")
-def pair_forces(i, j, s, slot, k, apt, meff, first_step, dt, law, blocks, deform, forces, con, work, tally, count):
+def pair_forces(i, j, s, slot, k, apt, meff, lf, lo, first_step, dt, law, blocks, deform, forces, con, work, tally,
+                count):
     """Contact law at the k points of pair (i, j) (slot s of this step, `slot` of last step's, area apt per
-    point); returns the number of points kept (bearing or bonded). The arrays the loop over the points uses are
+    point; lf >= 0: face lf of block lo decides each point's law row, dda/_kinds.py); returns the number of points
+    kept (bearing or bonded). The arrays the loop over the points uses are
     taken out of their bundles once, before it (a bundle handed to a helper inside the loop would cost a
     reference-count increment and decrement of each of its arrays per point)."""
     old = con.cur[0]
@@ -259,9 +262,27 @@ def pair_forces(i, j, s, slot, k, apt, meff, first_step, dt, law, blocks, deform
     npt_old, pid_old, us_old, bond_old = con.npt[old], con.pid[old], con.us[old], con.bond[old]
     pid_new, us_new, state_new, bond_new = con.pid[new], con.us[new], con.state[new], con.bond[new]
     pos_new, fn_new, depth_new = con.pos[new], con.fn[new], con.depth[new]
+    tab, face_row, face_shape, face_geo, intact_row = law.tab, law.face_row, law.face_shape, law.face_geo, \
+        law.intact_row
+    pos_old = con.pos[old]
+    tol = 1e-3 * min(blocks.size_b[i], blocks.size_b[j])
+    a_int, a_jnt = -1.0, -1.0
+    if lf >= 0 and face_shape[lf] == 1:  # a disc's face: the intact and joint points share their own areas
+        rows = np.empty(k, np.int64)
+        for q in range(k):
+            rows[q] = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
+        a_int, a_jnt = intact_share(lf, lo, p_pos, k, rows, nrm, pos, quat, face_geo, intact_row, R)
     kept = 0
     for q in range(k):
+        if lf >= 0:  # the law of the face's kind at this point (joint inside its disc, intact rock outside)
+            r = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
+            if a_int >= 0.0:
+                apt = a_int if r == intact_row else a_jnt
+            kn, ks, tanphi = tab[r, r, LAW_KN], tab[r, r, LAW_KS], tab[r, r, LAW_TANPHI]
+            coh, ten, zeta = tab[r, r, LAW_COH], tab[r, r, LAW_TEN], tab[r, r, LAW_ZETA]
         found, bonded = _shear_history(npt_old, pid_old, us_old, bond_old, slot, p_id[q], nrm, matched, us)
+        if not found and lf >= 0:  # a cut block model: the same place is the same point (dda/_kinds.py)
+            found, bonded = near_history(npt_old, pos_old, us_old, bond_old, slot, p_pos[q], tol, nrm, matched, us)
         if not found:
             bonded = first_step and (coh > 0.0 or ten > 0.0)
         if p_depth[q] <= 0.0 and not bonded:
@@ -304,6 +325,8 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
     vert, fnw, vs, fs, es = geom.vert, geom.fnw, geom.vs, geom.fs, geom.es
     he_origin, he_next, he_pair, he_face = geom.he_origin, geom.he_next, geom.he_pair, geom.he_face
     vert_he, edge_he, n_sat = geom.vert_he, geom.edge_he, work.n_sat
+    face_row = law.face_row
+    kinds = len(face_row) > 0
     p_pos, p_depth, p_id, scr, iscr, mass = work.p_pos, work.p_depth, work.p_id, work.scr, work.iscr, blocks.mass
     htab, key_old, nrm_old, npt_old, us_old = con.htab, con.key[old], con.nrm[old], con.npt[old], con.us[old]
     key_new, a_new, b_new, nrm_new, npt_new = con.key[new], con.a[new], con.b[new], con.nrm[new], con.npt[new]
@@ -324,7 +347,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
         mj = material[j]
         ks = lawtab[mi, mj, LAW_KS]
         kg = 0.0
-        if lawtab[mi, mj, LAW_TEN] > 0.0 or lawtab[mi, mj, LAW_COH] > 0.0:
+        if kinds or lawtab[mi, mj, LAW_TEN] > 0.0 or lawtab[mi, mj, LAW_COH] > 0.0:
             kg = keep_gap
         # last step's plane, or the centroids' line; a positive gap along it proves the blocks apart
         if slot >= 0:
@@ -371,8 +394,11 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                 apt = polygon_area(p_pos, k, nrm) / k
                 meff = _effective_mass(i, j, kin, mass, static)
                 count[C_CONTACTS] += 1
-                kept = pair_forces(i, j, s, slot, k, apt, meff, first_step, dt, law, blocks, deform, forces, con,
-                                   work, tally, count)
+                lf, lo = -1, -1
+                if kinds:
+                    lf, lo = law_face(i, j, nrm, fnw, fs, face_row)
+                kept = pair_forces(i, j, s, slot, k, apt, meff, lf, lo, first_step, dt, law, blocks, deform, forces,
+                                   con, work, tally, count)
         npt_new[s] = kept
         count[C_POINTS] += kept
         # shear-spring energy of last step's points of this pair that have no successor (they opened)
@@ -396,6 +422,7 @@ def carry_resting(law, material, asleep, con, static, tally, count):
     """Contacts between resting bodies are carried over unchanged (shear history and elastic energy kept)."""
     old = con.cur[0]
     new = 1 - old
+    kinds = len(law.face_row) > 0
     for s0 in range(con.n_pair[old]):
         a0 = con.a[old, s0]
         b0 = con.b[old, s0]
@@ -423,7 +450,10 @@ def carry_resting(law, material, asleep, con, static, tally, count):
                 con.us[new, s, q, a] = con.us[old, s0, q, a]
                 con.pos[new, s, q, a] = con.pos[old, s0, q, a]
                 u2 += con.us[old, s0, q, a] ** 2
-            tally[T_ELASTIC] += 0.5 * kn0 * d0 * d0
+            if kinds:  # the point's own kn (its kind's row): fn = kn depth
+                tally[T_ELASTIC] += 0.5 * con.fn[old, s0, q] * d0
+            else:
+                tally[T_ELASTIC] += 0.5 * kn0 * d0 * d0
             tally[T_ELASTIC] += 0.5 * ks0 * u2
         count[C_CONTACTS] += 1
         count[C_POINTS] += con.npt[old, s0]

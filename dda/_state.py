@@ -36,8 +36,10 @@ Sleep = namedtuple("Sleep", "movable asleep calm pe_sl par")
 # point count; per point feature id, shear displacement, state, bond, position, elastic normal force, depth;
 # the hash table on the pair key
 Contacts = namedtuple("Contacts", "cur n_pair key a b nrm npt pid us state bond pos fn depth htab")
-# contact-law table lawtab[material a, material b, LAW_*] and the gap within which bonded contacts are kept
-Law = namedtuple("Law", "tab keep_gap")
+# contact-law table lawtab[material a, material b, LAW_*] and the gap within which bonded contacts are kept; the
+# face kinds of a cut block model (dda/_kinds.py: per face its law row, where the row holds, the disc or triangle;
+# the intact-rock row; empty arrays: the materials decide)
+Law = namedtuple("Law", "tab keep_gap face_row face_shape face_geo intact_row")
 # energy (E_* columns), acc = [work of the prescribed blocks, potential of the sleeping ones], stats (ST_*)
 Books = namedtuple("Books", "energy acc stats")
 

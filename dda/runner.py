@@ -21,6 +21,7 @@ from sgim.machine import machine_info
 from sgim.outdir import output_folder
 
 from .answers import Answers, default_reports
+from .georun import GeoScene, is_sgim_scene, load_geo_scene
 from .plots import plot_series
 from .progress import RunProgress
 from .render import (block_polydata, faces_polydata, render_meshes, render_png, save_mesh, sphere_polydata,
@@ -238,7 +239,8 @@ def run(scene, out=None, force=False, progress=None, max_steps=None) -> RunOutco
     if isinstance(scene, dict):  # the tables of a scene file
         scene = scene_from_dict(scene, f"{scene.get('name', 'scene')}.toml")
     elif not isinstance(scene, DDAScene):
-        scene = load_scene(scene)  # SceneError before anything is created
+        # SceneError before anything is created; an sgim scene ([domain]) runs its block model (dda/georun.py)
+        scene = load_geo_scene(scene, progress=say) if is_sgim_scene(scene) else load_scene(scene)
     if out is not None:
         out = Path(out)
         if out.exists() and not out.is_dir():
@@ -275,6 +277,8 @@ def run(scene, out=None, force=False, progress=None, max_steps=None) -> RunOutco
             "answers": answers.finish(sim, res.energies[-1][-1]),
             "machine": machine_info(),
         }
+        if isinstance(scene, GeoScene):  # the block model of an sgim scene: blocks moved, the cut's summary
+            summary.update(scene.run_summary(sim))
         if out is not None:
             _write_outputs(scene, sim, res, tmp, frames, summary, say, out)
     headline = (f"{bs.n_blocks} blocks, {sim.steps} steps to t = {sim.time:.4g} s in {summary['wall_s']:.2f} s "

@@ -60,6 +60,7 @@ from ._state import (LAW_KN, LAW_TEN, LAW_ZETA, NENERGY, NLAW, NSTATS, ST_CONTAC
                      ST_POINTS, Blocks, Books, Contacts, Deform, Forces, Geometry, Grid, Law, Lists, Loads, Sleep,
                      State)
 from .contactlaw import ContactLaw
+from ._kinds import no_kinds
 from .progress import tracker
 from .results import Results
 from .system import quat_to_matrix
@@ -87,9 +88,12 @@ class Simulation:
 
     def __init__(self, system, law: ContactLaw | None = None, gravity=(0.0, 0.0, -9.81), dt=None, safety=0.5,
                  local_damping=0.0, pair_laws=None, cell_factor=1.5, blowup_ratio=0.5, sleep=False,
-                 sleep_velocity=None, sleep_accel=None, sleep_steps=200, on_dt=None):
+                 sleep_velocity=None, sleep_accel=None, sleep_steps=200, on_dt=None, face_laws=None):
         """`on_dt(sim)`, if given, is called as soon as the time step is known, before any kernel is loaded
-        (the step limit of dda/limits.py refuses an endless run at once)."""
+        (the step limit of dda/limits.py refuses an endless run at once). `face_laws`: (face_row, face_shape,
+        face_geo, intact_row), the law row of each face of a cut block model (dda/_kinds.py; dda/georun.py
+        makes them); None: the blocks' materials decide every law."""
+        self.face_laws = no_kinds() if face_laws is None else face_laws
         self.system = system
         self.law = law or ContactLaw()
         self.gravity = np.asarray(gravity, float)
@@ -279,7 +283,7 @@ class Simulation:
             Contacts(self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np,
                      self.c_pid, self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth,
                      self.htab),
-            Law(self.lawtab, self.keep_gap),
+            Law(self.lawtab, self.keep_gap, *self.face_laws),
             Books(self.energy, self.acc, self.stats),
         )
 

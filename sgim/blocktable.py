@@ -11,6 +11,29 @@ builder ignores the sphere keys ([packing], [bonds], [render], ...).
     friction = 40.0                  # degrees, intact rock
     seed = 0                         # draws of the joint sets' persistence
 
+    kn = 1.0e10                      # N/m per contact point, every contact of the block model (default)
+    ks = 5.0e9                       # N/m (default kn / 2)
+    damping = 0.1                    # ratio of critical, normal and locked shear springs
+    density = 2600.0                 # kg/m3 of every block
+    joint_friction = 30.0            # degrees: every joint and fault face inside its disc (unless a law names it)
+    joint_cohesion = 0.0             # Pa
+    joint_tensile = 0.0              # Pa
+
+    [[blocks.law]]                   # the law of one discontinuity, joint set or fault, by name
+    name = "J1"                      # a [[discontinuity]], [[joint_set]] set or [[blocks.joint_set]] name
+    friction = 25.0                  # deg; cohesion, tensile (Pa), kn, ks (N/m): absent ones as the joints'
+
+    [blocks.run]                     # dda run of the scene: the blocks under gravity
+    duration = 2.0                   # s (required for dda run)
+    dt = 0.0                         # s (0: automatic, safety x critical)
+    safety = 0.5
+    gravity = [0.0, 0.0, -9.81]
+    local_damping = 0.0
+    frames = 20                      # VTU frames
+    record_every = 0.02              # s (default duration / 100)
+    sleep = true                     # resting blocks stop being integrated
+    fixed = ["x-", "x+", "y-", "y+", "z-"]   # blocks with a face on these domain faces are fixed (the default)
+
     [[blocks.joint_set]]             # a persistent joint set of the block fabric
     name = "B1"
     dip = 75.0
@@ -39,8 +62,26 @@ DEFAULTS = {
     "blocks.friction": 40.0,  # degrees
     "blocks.seed": 0,
     "blocks.joint_set[].persistence": 1.0,
+    "blocks.kn": 1.0e10,  # N/m per contact point
+    "blocks.damping": 0.1,
+    "blocks.density": 2600.0,  # kg/m3
+    "blocks.joint_friction": 30.0,  # degrees
+    "blocks.joint_cohesion": 0.0,  # Pa
+    "blocks.joint_tensile": 0.0,  # Pa
+    "blocks.run.dt": 0.0,  # s: automatic
+    "blocks.run.safety": 0.5,
+    "blocks.run.gravity": (0.0, 0.0, -9.81),  # m/s2
+    "blocks.run.local_damping": 0.0,
+    "blocks.run.frames": 20,
+    "blocks.run.sleep": True,
+    "blocks.run.fixed": ("x-", "x+", "y-", "y+", "z-"),  # the blocks on these domain faces are fixed
 }
 BLOCK_KEYS = {"min_volume", "cut_by", "cohesion", "tensile", "friction", "seed", "joint_set"}
+BLOCK_KEYS |= {"kn", "ks", "damping", "density", "joint_friction", "joint_cohesion", "joint_tensile", "law", "run"}
+LAW_KEYS = {"name", "friction", "cohesion", "tensile", "kn", "ks"}
+RUN_KEYS = {"duration", "dt", "safety", "gravity", "local_damping", "frames", "record_every", "sleep", "fixed"}
+SIDES = ("x-", "x+", "y-", "y+", "z-", "z+")  # the domain's faces, by the axis and side of their outward normal
+STIFF = {"lo": 1e-20, "hi": 1e40, "unit": " N/m"}
 SET_KEYS = {"name", "dip", "dip_direction", "spacing", "origin", "persistence", "extent"}
 STRESS = {"hi": 1e12, "unit": " Pa"}
 
@@ -60,6 +101,18 @@ class FabricSet:
 
 
 @dataclass
+class Law:
+    """A contact law of the block model: kn, ks [N/m per point] (None: the [blocks] ones), friction [deg], cohesion
+    and tensile strength [Pa]."""
+
+    friction: float
+    cohesion: float = 0.0
+    tensile: float = 0.0
+    kn: float | None = None
+    ks: float | None = None
+
+
+@dataclass
 class BlocksSpec:
     min_volume: float
     cut_by: list | None  # names; None: every discontinuity and joint set of the scene
@@ -68,6 +121,17 @@ class BlocksSpec:
     friction: float
     seed: int
     joint_sets: list = field(default_factory=list)
+    kn: float = DEFAULTS["blocks.kn"]
+    ks: float | None = None  # None: kn / 2
+    damping: float = DEFAULTS["blocks.damping"]
+    density: float = DEFAULTS["blocks.density"]
+    joint: Law = field(default_factory=lambda: Law(DEFAULTS["blocks.joint_friction"]))
+    laws: dict = field(default_factory=dict)  # name -> Law ([[blocks.law]])
+    run: dict = field(default_factory=lambda: default_run())  # [blocks.run]: duration (None: absent), dt, ...
+
+    def law_of(self, name):
+        """The joint law of the discontinuity, set or fault ``name`` (its [[blocks.law]], else the joints')."""
+        return self.laws.get(name, self.joint)
 
 
 def _read_set(rd, js, key, k, domain):
@@ -125,6 +189,20 @@ def read_blocks(rd, data, scene):
         friction=rd.number(bt, "friction", "blocks.friction", default=DEFAULTS["blocks.friction"], lo=0.0, hi=89.0),
         seed=rd.integer(bt, "seed", "blocks.seed", DEFAULTS["blocks.seed"], 0, 2**63 - 1),
     )
+    spec.kn = rd.number(bt, "kn", "blocks.kn", default=DEFAULTS["blocks.kn"], positive=True, **STIFF)
+    spec.ks = rd.number(bt, "ks", "blocks.ks", positive=True, **STIFF) if "ks" in bt else None
+    spec.damping = rd.number(bt, "damping", "blocks.damping", default=DEFAULTS["blocks.damping"], nonneg=True, hi=1.0)
+    spec.density = rd.number(bt, "density", "blocks.density", default=DEFAULTS["blocks.density"], positive=True,
+                             hi=1e40, unit=" kg/m3")
+    spec.joint = Law(
+        rd.number(bt, "joint_friction", "blocks.joint_friction", default=DEFAULTS["blocks.joint_friction"], lo=0.0,
+                  hi=89.0),
+        rd.number(bt, "joint_cohesion", "blocks.joint_cohesion", default=DEFAULTS["blocks.joint_cohesion"],
+                  nonneg=True, **STRESS),
+        rd.number(bt, "joint_tensile", "blocks.joint_tensile", default=DEFAULTS["blocks.joint_tensile"],
+                  nonneg=True, **STRESS))
+    spec.laws = _read_laws(rd, bt, spec)
+    spec.run = _read_run(rd, bt)
     sets = bt.get("joint_set", [])
     if not isinstance(sets, list):
         rd.err("blocks.joint_set", sets, "must be an array of tables ([[blocks.joint_set]])")
@@ -135,7 +213,69 @@ def read_blocks(rd, data, scene):
             rd.err(f"blocks.joint_set[{k}].name", s.name, f"repeats the name of blocks.joint_set[{seen[s.name]}]")
         seen[s.name] = k
         spec.joint_sets.append(s)
+    known = discontinuity_names(scene) | set(seen)
+    for k, name in enumerate(spec.laws):
+        if name not in known:
+            rd.err(f"blocks.law[{k}].name", name, "names no [[discontinuity]], [[joint_set]] or [[blocks.joint_set]] "
+                   "of the scene" + (f" (known: {', '.join(sorted(known)[:12])})" if known else " (the scene has none)"))
     return spec
+
+
+def _read_laws(rd, bt, spec):
+    laws = {}
+    raw = bt.get("law", [])
+    if not isinstance(raw, list) or any(not isinstance(t, dict) for t in raw):
+        rd.err("blocks.law", raw, "must be an array of tables ([[blocks.law]])")
+    for k, lt in enumerate(raw):
+        key = f"blocks.law[{k}]"
+        rd.known(lt, LAW_KEYS, key)
+        name = rd.string(lt, "name", f"{key}.name", "")
+        if not name:
+            rd.err(f"{key}.name", name, "missing: the name of a discontinuity, joint set or fault")
+        if name in laws:
+            rd.err(f"{key}.name", name, "a second law for the same name")
+        j = spec.joint
+        laws[name] = Law(
+            rd.number(lt, "friction", f"{key}.friction", default=j.friction, lo=0.0, hi=89.0),
+            rd.number(lt, "cohesion", f"{key}.cohesion", default=j.cohesion, nonneg=True, **STRESS),
+            rd.number(lt, "tensile", f"{key}.tensile", default=j.tensile, nonneg=True, **STRESS),
+            rd.number(lt, "kn", f"{key}.kn", positive=True, **STIFF) if "kn" in lt else None,
+            rd.number(lt, "ks", f"{key}.ks", positive=True, **STIFF) if "ks" in lt else None)
+    return laws
+
+
+def default_run():
+    """The [blocks.run] settings of a scene without that table (duration None: dda run needs one)."""
+    d = DEFAULTS
+    return {"duration": None, "dt": None, "safety": d["blocks.run.safety"], "gravity": np.array(d["blocks.run.gravity"]),
+            "local_damping": d["blocks.run.local_damping"], "frames": d["blocks.run.frames"],
+            "sleep": d["blocks.run.sleep"], "record_every": None, "fixed": list(d["blocks.run.fixed"])}
+
+
+def _read_run(rd, bt):
+    rt = rd.table(bt, "run", "blocks.run")
+    rd.known(rt, RUN_KEYS, "blocks.run")
+    d = DEFAULTS
+    run = {"duration": rd.number(rt, "duration", "blocks.run.duration", positive=True, hi=1e12, unit=" s")
+           if "duration" in rt else None,
+           "dt": rd.number(rt, "dt", "blocks.run.dt", default=d["blocks.run.dt"], nonneg=True, unit=" s") or None,
+           "safety": rd.number(rt, "safety", "blocks.run.safety", default=d["blocks.run.safety"], positive=True,
+                               hi=1.0),
+           "gravity": rd.vector(rt, "gravity", "blocks.run.gravity", default=d["blocks.run.gravity"]),
+           "local_damping": rd.number(rt, "local_damping", "blocks.run.local_damping",
+                                      default=d["blocks.run.local_damping"], nonneg=True, hi=0.99),
+           "frames": rd.integer(rt, "frames", "blocks.run.frames", d["blocks.run.frames"], 1, 100000),
+           "sleep": rd.boolean(rt, "sleep", "blocks.run.sleep", d["blocks.run.sleep"])}
+    run["fixed"] = rd.value(rt, "fixed", "blocks.run.fixed", list(d["blocks.run.fixed"]), "list of strings")
+    if not isinstance(run["fixed"], list) or any(f not in SIDES for f in run["fixed"]):
+        rd.err("blocks.run.fixed", run["fixed"], f"must be a list drawn from {', '.join(SIDES)} (domain faces)")
+    run["record_every"] = None
+    if "record_every" in rt:
+        run["record_every"] = rd.number(rt, "record_every", "blocks.run.record_every", positive=True, unit=" s")
+        if run["duration"] is not None and run["record_every"] > run["duration"]:
+            rd.err("blocks.run.record_every", run["record_every"],
+                   f"must not exceed blocks.run.duration = {run['duration']:g} s")
+    return run
 
 
 def discontinuity_names(scene):

@@ -1,0 +1,196 @@
+"""``dda run`` of an sgim scene: its block model (dda/geoblocks.py) run under gravity by the block engine.
+
+    from dda.georun import load_geo_scene
+    from dda.runner import run
+    outcome = run(load_geo_scene("cases/scenes/open_pit_blocks.toml"), "out/pit")   # or run("....toml", ...)
+
+``dda run SCENE.toml`` takes an sgim scene (a file with ``[domain]``) as it takes a DDA scene: the scene is cut
+into blocks, the blocks with a face on the domain's sides or bottom are fixed (the model's boundary, ``[blocks.run] fixed``; the top is
+the ground), and the others move under gravity with the run settings of ``[blocks.run]`` (duration required),
+sleeping when at rest (``[blocks.run] sleep``, default true: a resting block is neither integrated nor searched
+for contacts). The outputs are those of a DDA block run (dda/runner.py) plus ``blocks_moved`` in summary.json.
+
+Contact laws by face kind (dda/_kinds.py). The law table gets one row per law: ``law:intact`` (``[blocks]``
+cohesion, tensile, friction: a cemented contact present at the start, which breaks for good when its strength is
+passed), ``law:NAME`` for every joint set, disc, DFN set, triangulated discontinuity and fault that made a face
+(its ``[[blocks.law]]``, else the joint law of ``[blocks]``). A face made by a joint set plane or an intact split
+has its row over the whole face; a face made by a disc (a triangle) has its row inside the disc (the triangle)
+and the intact row outside; domain and excavation faces have none (two blocks meeting there later take the
+blocks' material law: ``[blocks]`` friction, no cohesion). kn, ks and damping are ``[blocks]``'s unless a law
+gives its own kn, ks.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sgim.blocktable import DEFAULTS as BLOCK_DEFAULTS
+from sgim.common import SceneError
+from sgim.reader import read_toml
+from sgim.scene import load_scene as load_sgim_scene
+
+from .blockcut import face_planes
+from .contactlaw import ContactLaw
+from .geoblocks import DOMAIN, EXCAVATION, INTACT, build_blocks, default_spec
+from .limits import check_block_run
+from .scene import OUTPUT_FORMATS, DDAScene, Material
+from .simulation import Simulation
+from .system import quat_to_matrix
+
+INTACT_ROW = "law:intact"
+SHAPES = {"plane": 0, "surface": 0, "disc": 1, "triangle": 2}
+
+
+def is_sgim_scene(path):
+    """True when the TOML file `path` is an sgim scene (it has a [domain] table and no [simulation])."""
+    data, _ = read_toml(path)
+    return "domain" in data and "simulation" not in data
+
+
+def _law_name(model, src, spec):
+    """The [[blocks.law]] name that applies to source `src`: its own name, or the set of a DFN fracture id."""
+    name = model.sources[src].name
+    if name in spec.laws:
+        return name
+    base = name.rsplit("-", 1)[0]
+    return base if base in spec.laws else name
+
+
+def _contact_law(spec, law):
+    kn = law.kn if law.kn is not None else spec.kn
+    ks = law.ks if law.ks is not None else (spec.ks if spec.ks is not None and law.kn is None else kn / 2)
+    return ContactLaw(kn=kn, ks=ks, friction_deg=law.friction, cohesion=law.cohesion, tensile=law.tensile,
+                      damping=spec.damping)
+
+
+class GeoScene(DDAScene):
+    """A DDAScene made from an sgim scene's block model; ``build()`` gives the Simulation its face kinds."""
+
+    model = None
+    spec = None
+    face_src = None  # per block, its faces' sources (the model's)
+
+    def law_rows(self):
+        """{row name: ContactLaw}: the intact row and one per law name that made a face."""
+        sp = self.spec
+        rows = {INTACT_ROW: ContactLaw(kn=sp.kn, ks=sp.ks, friction_deg=sp.friction, cohesion=sp.cohesion,
+                                       tensile=sp.tensile, damping=sp.damping)}
+        for b in self.model.blocks:
+            for s in set(b.src.tolist()):
+                kind = self.model.sources[s].kind
+                if kind in (DOMAIN, EXCAVATION, INTACT):
+                    continue
+                name = _law_name(self.model, s, sp)
+                rows.setdefault(f"law:{name}", _contact_law(sp, sp.law_of(name)))
+        return rows
+
+    def face_laws(self, bs, names):
+        """(face_row, face_shape, face_geo, intact_row) of the system's faces (dda/_kinds.py), the rows indexed
+        in `names` (the law table's materials)."""
+        A = bs.arrays()
+        nf = int(A.face_start[-1])
+        row = np.full(nf, -1, np.int64)
+        shape = np.zeros(nf, np.int64)
+        geo = np.zeros((nf, 9))
+        intact = names.index(INTACT_ROW)
+        for i, b in enumerate(self.model.blocks):
+            R = quat_to_matrix(A.quat[i])
+            f0 = int(A.face_start[i])
+            for k, s in enumerate(b.src.tolist()):
+                src = self.model.sources[s]
+                if src.kind in (DOMAIN, EXCAVATION):
+                    continue
+                if src.kind == INTACT:
+                    row[f0 + k] = intact
+                    continue
+                row[f0 + k] = names.index(f"law:{_law_name(self.model, s, self.spec)}")
+                shape[f0 + k] = SHAPES[src.shape]
+                if src.shape == "disc":
+                    geo[f0 + k, :3] = (np.asarray(src.centre) - A.pos[i]) @ R
+                    geo[f0 + k, 3:6] = np.asarray(src.normal) @ R
+                    geo[f0 + k, 6] = src.radius
+                elif src.shape == "triangle":
+                    geo[f0 + k] = ((np.asarray(src.tri) - A.pos[i]) @ R).reshape(9)
+        return row, shape, geo, intact
+
+    def build(self, max_steps=None, duration=None, check=True):
+        bs = self.block_system()
+        rows = self.law_rows()
+        for name in rows:
+            if name not in bs.materials:
+                bs.materials.append(name)
+        pair_laws = dict(self.pair_laws)
+        pair_laws.update({(n, n): law for n, law in rows.items()})
+        face_laws = self.face_laws(bs, bs.materials)
+
+        def step_check(sim):
+            check_block_run(self, sim, max_steps=max_steps, duration=duration)
+
+        sim = Simulation(bs, self.law, gravity=self.gravity, dt=self.dt, safety=self.safety,
+                         local_damping=self.local_damping, pair_laws=pair_laws,
+                         on_dt=step_check if check else None, face_laws=face_laws, **self.sleep)
+        # touching faces of cut blocks meet at a gap of rounding size: the cemented (intact) contacts must be
+        # found at the first step, so the kept gap is at least a millionth of the median block
+        sim.keep_gap = max(sim.keep_gap, 1e-6 * sim.d50)
+        sim.gap = max(sim.gap, 0.02 * sim.d50 + sim.keep_gap)
+        return bs, sim
+
+    def run_summary(self, sim, moved=None):
+        """blocks_moved: free blocks displaced by more than `moved` (default a hundredth of the median block)."""
+        moved = 0.01 * sim.d50 if moved is None else moved
+        d = np.linalg.norm(sim.pos - sim.pos0, axis=1)
+        free = ~np.asarray(sim.A.fixed, bool)
+        return {"blocks_moved": int((d[free] > moved).sum()), "moved_threshold_m": moved,
+                "fixed_blocks": int((~free).sum()), "max_displacement_m": float(d[free].max()) if free.any() else 0.0,
+                "cut": {k: v for k, v in self.model.summary().items() if k != "seconds"}}
+
+
+def boundary_fixed(model, sides=("x-", "x+", "y-", "y+", "z-")):
+    """Per block: True when it has a face on one of the domain's faces `sides` ("x-": outward normal -x, ...)."""
+    want = np.array([[(1.0 if s[1] == "+" else -1.0) * (a == "xyz".index(s[0])) for a in range(3)] for s in sides])
+    out = np.zeros(len(model.blocks), bool)
+    for i, b in enumerate(model.blocks):
+        dom = np.array([model.sources[s].kind == DOMAIN for s in b.src])
+        if dom.any() and len(want):
+            n, _ = face_planes(b)
+            out[i] = bool(((n[dom] @ want.T) > 1 - 1e-9).any())
+    return out
+
+
+def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoScene:
+    """The GeoScene of an sgim Scene (sgim.scene.load_scene): its block model (built unless `model` is given),
+    the boundary blocks fixed (or the blocks flagged in `fixed`), [blocks.run] as the run settings."""
+    spec = scene.blocks if getattr(scene, "blocks", None) is not None else default_spec(scene)
+    path = path or getattr(scene, "path", "<scene>")
+    run = spec.run
+    if run.get("duration") is None:
+        raise SceneError(path, "blocks.run.duration", None, "missing value: dda run of an sgim scene runs its "
+                                                            "block model for [blocks.run] duration (s)")
+    model = model if model is not None else build_blocks(scene, progress=progress)
+    fix = boundary_fixed(model, run["fixed"]) if fixed is None else np.asarray(fixed, bool)
+    specs = model.specs()
+    for s, f in zip(specs, fix):
+        s.fixed = bool(f)
+    if fix.all():
+        raise SceneError(path, "blocks.run.fixed", run["fixed"], "every block of the block model has a face on "
+                                                                  "these domain faces: nothing would move")
+    materials = {m: Material(m, spec.density) for m in {s.material for s in specs}}
+    duration = run["duration"]
+    gs = GeoScene(path=path, text="", name=getattr(scene, "name", "blocks"), blocks=specs, materials=materials,
+                  law=ContactLaw(kn=spec.kn, ks=spec.ks, friction_deg=spec.friction, damping=spec.damping),
+                  pair_laws={}, duration=duration, dt=run["dt"], safety=run["safety"],
+                  gravity=np.asarray(run["gravity"], float), local_damping=run["local_damping"],
+                  record_every=run["record_every"] or duration / 100, frames=run["frames"],
+                  formats=OUTPUT_FORMATS, sources=["blocks"] * len(specs), sleep={"sleep": run["sleep"]})
+    gs.model, gs.spec = model, spec
+    return gs
+
+
+def load_geo_scene(path, progress=None) -> GeoScene:
+    """The GeoScene of the sgim scene file `path` (SceneError on a bad scene, before anything is cut);
+    `progress(line)` receives a line per cutting stage."""
+    scene = load_sgim_scene(path)
+    say = None if progress is None else (lambda stage, n, s: progress(f"cut        {stage:<11}{n} blocks  {s:.2f} s"))
+    return geo_scene(scene, progress=say, path=path)
+
+
+__all__ = ["GeoScene", "INTACT_ROW", "boundary_fixed", "geo_scene", "is_sgim_scene", "load_geo_scene"]

@@ -1,0 +1,182 @@
+"""dda run of an sgim scene's block model (dda/georun.py, dda/_kinds.py) against analytical mechanics:
+
+- planar sliding: a slope (a triangulated ground surface) cut by one daylighting disc larger than the slope slides
+  at a joint friction 0.5 % below the joint's dip and holds at 0.5 % above it (limit equilibrium: tan phi = tan psi);
+- a crown key block that widens downward (two joint discs over a box cavity) falls at g (z = z0 - g t^2 / 2
+  within 1 %), its inverted twin stays;
+- the law of each contact point follows the kind of the face it lies on: joint inside the disc, intact rock
+  outside (a brute-force test of the point against the disc's radius), and a cemented (intact) contact is bonded
+  at the start;
+- `dda run SCENE.toml` on an sgim scene writes the run's outputs and summary (blocks moved), and a scene without
+  [blocks.run] duration is refused in one line naming the key.
+"""
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from dda.geoblocks import INTACT, build_blocks
+from dda.georun import geo_scene
+from sgim.scene import scene_from_dict
+
+G = 9.81
+BETA, PSI, XD = 60.0, 35.0, 17.0  # slope face angle, joint dip, where the joint daylights on the face (x)
+
+
+def slope_data(phi, radius=60.0, centre=None, **blocks):
+    """A 30 x 4 x 20 m box under a ground at z = 16 stepping down a 60 degree face to z = 6, cut by a joint disc
+    dipping PSI towards +x that daylights on the face at x = XD."""
+    zf = 16 - math.tan(math.radians(BETA)) * (XD - 12)
+    xt = 12 + 10 / math.tan(math.radians(BETA))
+    verts = [[x, y, z] for x, z in zip([0.0, 12.0, xt, 30.0], [16.0, 16.0, 6.0, 6.0]) for y in (0.0, 4.0)]
+    faces = []
+    for k in range(3):
+        faces += [[2 * k, 2 * k + 2, 2 * k + 3], [2 * k, 2 * k + 3, 2 * k + 1]]
+    disc = {"name": "J", "centre": centre or [XD, 2.0, zf], "dip": PSI, "dip_direction": 90.0, "radius": radius}
+    bl = {"kn": 1e10, "damping": 0.1, "friction": phi, "joint_friction": phi,
+          "run": {"duration": 1.0, "sleep": False, "local_damping": 0.8}}
+    bl.update(blocks)
+    return {"domain": {"min": [0, 0, 0], "max": [30, 4, 20]}, "packing": {"kind": "cubic", "radius": 0.5},
+            "excavation": [{"name": "ground", "vertices": verts, "faces": faces}], "discontinuity": [disc],
+            "blocks": bl}
+
+
+def free_run(data, free_of, t1, t2):
+    """Run the scene's block model with only the blocks free_of(model) free; the free block's displacement at
+    t1 and the further displacement from t1 to t1 + t2."""
+    scene = scene_from_dict(data, "test.toml")
+    model = build_blocks(scene)
+    free = free_of(model)
+    gs = geo_scene(scene, model=model, fixed=~free)
+    _, sim = gs.build()
+    i = int(np.nonzero(free)[0][0])
+    sim.run(t1)
+    d1 = sim.pos[i] - sim.pos0[i]
+    sim.run(t2)
+    return d1, sim.pos[i] - sim.pos0[i] - d1, sim, i
+
+
+def above_joint(model):
+    return np.array([b.volume_centroid()[1][2] > 10.0 for b in model.blocks])
+
+
+@pytest.mark.parametrize("ratio,slides", [(0.995, True), (1.005, False)])
+def test_planar_sliding_onset_at_the_joint_dip(ratio, slides):
+    phi = math.degrees(math.atan(ratio * math.tan(math.radians(PSI))))  # tan phi 0.5 % off tan psi
+    _, later, _, _ = free_run(slope_data(phi), above_joint, 0.5, 0.5)
+    moved = float(np.linalg.norm(later))
+    # sliding with local damping 0.8: a = 0.2 g (sin psi - cos psi tan phi) gives about 1e-3 m in the second half
+    # second; held, the block does not move at all once the first loading has settled
+    assert (moved > 3e-4) == slides, moved
+
+
+def key_block_data(widens_down):
+    """A box cavity (x 6..14, z 4..10) under a block between two joint discs that meet above it; the block widens
+    downward (leaning planes) or upward (its inverted twin)."""
+    lean = 0.25 if widens_down else -0.25  # dx / dz of the left plane (the right one mirrored)
+    discs = []
+    for name, x0, s in (("L", 8.0, 1.0), ("R", 12.0, -1.0)):
+        n = np.array([1.0, 0.0, -s * lean]) * s  # normal of the plane through (x0, *, 10) with slope dx/dz = s lean
+        n /= np.linalg.norm(n)
+        discs.append({"name": name, "centre": [x0, 2.0, 10.0], "normal": n.tolist(), "radius": 9.0})
+    return {"domain": {"min": [0, 0, 0], "max": [20, 4, 20]}, "packing": {"kind": "cubic", "radius": 0.5},
+            "cavity": [{"name": "gallery", "shape": "box", "min": [6.0, -1.0, 4.0], "max": [14.0, 5.0, 10.0]}],
+            "discontinuity": discs,
+            "blocks": {"kn": 1e10, "joint_friction": 30.0, "run": {"duration": 1.0, "sleep": False}}}
+
+
+def crown(model):
+    """The block on the cavity's roof between the two planes (its centroid over x = 10, between z = 10 and 16; the
+    planes also cut off a small wedge above the apex where they cross, which stays fixed)."""
+    c = np.array([b.volume_centroid()[1] for b in model.blocks])
+    return (np.abs(c[:, 0] - 10.0) < 1.5) & (c[:, 2] > 10.0) & (c[:, 2] < 16.0)
+
+
+def test_key_block_widening_downward_falls_at_g_and_its_twin_stays():
+    t = 0.3
+    d, _, sim, i = free_run(key_block_data(True), crown, t, 1e-9)
+    assert sim.A.fixed.sum() == len(sim.A.fixed) - 1
+    assert abs(-d[2] - 0.5 * G * sim.time ** 2) <= 0.01 * 0.5 * G * sim.time ** 2, (d, sim.time)
+    assert abs(d[0]) < 1e-9 and abs(d[1]) < 1e-9
+    d, _, _, _ = free_run(key_block_data(False), crown, t, 1e-9)
+    assert np.linalg.norm(d) < 1e-3, d  # wedged in: the elastic settling only
+
+
+def test_point_law_follows_the_face_kind():
+    """A disc covering the down-dip half of the joint face: the points of the sliding block's joint face get the
+    joint law inside the disc and intact rock outside, decided against the disc's radius by brute force; the
+    intact points are bonded at the start."""
+    R = 1000.0
+    zf = 16 - math.tan(math.radians(BETA)) * (XD - 12)
+    top = np.array([XD - (16 - zf) / math.tan(math.radians(PSI)), 2.0, 16.0])
+    mid = (top + np.array([XD, 2.0, zf])) / 2
+    centre = mid + R * np.array([math.cos(math.radians(PSI)), 0.0, -math.sin(math.radians(PSI))])
+    data = slope_data(15.0, radius=R, centre=centre.tolist(), cohesion=1e6, tensile=1e6)
+    scene = scene_from_dict(data, "test.toml")
+    model = build_blocks(scene)
+    free = above_joint(model)
+    _, sim = geo_scene(scene, model=model, fixed=~free).build()
+    sim.run(sim.dt, record_every=sim.dt)
+    c = sim.contacts()
+    assert len(c["a"]) >= 4
+    rel = c["position"] - centre
+    n = np.array([math.sin(math.radians(PSI)), 0.0, math.cos(math.radians(PSI))])
+    outside = np.linalg.norm(rel - np.outer(rel @ n, n), axis=1) > R
+    assert 0 < outside.sum() < len(outside)
+    cur = int(sim.cur[0])
+    bonded = np.concatenate([sim.c_bond[cur, s, :sim.c_np[cur, s]] for s in range(int(sim.c_n_pair[cur]))])
+    np.testing.assert_array_equal(bonded, outside)  # intact points cemented, joint points not
+    kinds = model.point_kinds(int(np.nonzero(free)[0][0]), list(model.sources[s].name for s in
+                                                                 model.blocks[int(np.nonzero(free)[0][0])].src).index("J"),
+                              c["position"])
+    np.testing.assert_array_equal(kinds == INTACT, outside)
+
+
+def test_dda_run_cli_on_an_sgim_scene(tmp_path):
+    data = key_block_data(True)
+    # intact rock with cohesion only: with both cohesion and tensile strength this run blows up once blocks sleep
+    # (an open problem of sleeping with cemented contacts in tension, see the commit that added this test)
+    data["blocks"].update({"cohesion": 1e6, "tensile": 0.0})
+    data["blocks"]["run"] = {"duration": 0.2, "frames": 2, "sleep": True, "fixed": ["x-", "x+", "z-"]}
+    scene = tmp_path / "key.toml"
+    scene.write_text(_toml(data))
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "dda.cli", "run", str(scene), "-o", str(out), "--quiet"],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    # the key block falls (0.2 m in 0.2 s); the other free pieces (not on the domain's x sides or bottom) rest
+    assert summary["blocks_moved"] == 1 and summary["status"] == "ok"
+    assert (out / "blocks.pvd").is_file() and len(list((out / "frames").glob("*.vtu"))) == 3
+    del data["blocks"]["run"]
+    scene.write_text(_toml(data))
+    r = subprocess.run([sys.executable, "-m", "dda.cli", "run", str(scene), "-o", str(tmp_path / "o2")],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 2 and "blocks.run.duration" in r.stderr and not (tmp_path / "o2").exists()
+
+
+def _value(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return repr(float(v)) if isinstance(v, float) else repr(v)
+
+
+def _toml(data, prefix=""):
+    """TOML text of nested dicts (tables) and lists of dicts (arrays of tables)."""
+    lines, later = [], []
+    for k, v in data.items():
+        path = f"{prefix}{k}"
+        if isinstance(v, dict):
+            later.append(f"\n[{path}]\n" + _toml(v, path + "."))
+        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            later += [f"\n[[{path}]]\n" + _toml(x, path + ".") for x in v]
+        else:
+            lines.append(f"{k} = {_value(v)}")
+    return "\n".join(lines) + "\n" + "".join(later)
