@@ -11,6 +11,7 @@ import numpy as np
 
 from .common import atomic_path
 from .model import SphereModel
+from .portable import matmul, norm, sin_cos_deg
 from .scene import parse_cut
 
 # pyvista and vtk are imported inside the functions that draw: they take seconds to load, and only pictures need them
@@ -148,16 +149,17 @@ class Frame:
 
     def fit(self, lo, hi, azimuth=-150.0, elevation=35.0):
         """Parallel camera looking from `azimuth` / `elevation` [degrees] that shows the box lo..hi whole,
-        axes labels included, centred in the model area. Returns the scale [m per pixel]."""
+        axes labels included, centred in the model area. Returns the scale [m per pixel]. The camera's numbers
+        have the same bits on every CPU (sgim/portable.py): the spheres drawn (:func:`in_sight`) follow from them."""
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
         span = float(np.max(hi - lo)) or 1.0
-        az, el = np.radians(azimuth), np.radians(elevation)
-        d = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])  # towards the eye
+        (sa, ca), (se, ce) = sin_cos_deg(azimuth), sin_cos_deg(elevation)
+        d = np.array([ce * ca, ce * sa, se])  # towards the eye
         right = np.cross(-d, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
+        right /= norm(right)
         up = np.cross(right, -d)
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        pr, pu = corners @ right, corners @ up
+        pr, pu = matmul(corners, right), matmul(corners, up)
         x0, y0, x1, y1 = self.area
         # room for the axes' labels and titles around the box
         mx, my = 5.0 * self.fs + 0.04 * (x1 - x0), 4.5 * self.fs + 0.04 * (y1 - y0)
@@ -165,7 +167,8 @@ class Frame:
         wr, wu = max(pr.max() - pr.min(), 1e-12 * span), max(pu.max() - pu.min(), 1e-12 * span)
         s = max(wr / aw, wu / ah)
         mid = (lo + hi) / 2
-        mid = mid + right * ((pr.max() + pr.min()) / 2 - mid @ right) + up * ((pu.max() + pu.min()) / 2 - mid @ up)
+        mid = mid + right * ((pr.max() + pr.min()) / 2 - matmul(mid, right)) \
+            + up * ((pu.max() + pu.min()) / 2 - matmul(mid, up))
         cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
         focal = mid - right * (cx - self.W / 2) * s - up * (cy - self.H / 2) * s
         cam = self.pl.camera
