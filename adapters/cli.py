@@ -38,7 +38,7 @@ def cmd_export(args):
                  "viscous_damping": args.viscous_damping, "liggghts_joints": args.liggghts_joints,
                  "liggghts_joint_walls": args.liggghts_joint_walls, "joint_walls": args.joint_walls}
     info = export(args.source, args.to, args.output, variant=args.variant, overrides=overrides, progress=say,
-                  max_steps=positive_int(args.max_steps, "--max-steps"), force=args.force)
+                  max_steps=positive_int(args.max_steps, "--max-steps"), force=args.force, blocks=args.blocks)
     if args.json:
         print(json.dumps(info, indent=2))
     return 0
@@ -93,6 +93,8 @@ def main(argv=None):
     p.add_argument("--liggghts-joint-walls", metavar="HOW", help="liggghts: the older spelling of --joint-walls")
     p.add_argument("--max-steps", metavar="N", help="refuse a deck of more than N steps (duration / dt; overrides "
                                                     "the scene's [simulation] max_steps, default 1e8)")
+    p.add_argument("--blocks", action="store_true", help="an sgim scene's block model (dda blocks / dda run of the "
+                                                         "scene) instead of its spheres: yade writes Polyhedra")
     p.add_argument("--json", action="store_true", help="print deck.json")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)

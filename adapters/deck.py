@@ -140,8 +140,9 @@ def _apply_overrides(run, ov, path):
             raise DeckError(f"{path}: --viscous-damping = {raw!r}: {msg}") from None
 
 
-def export(source, to, out, variant=None, overrides=None, progress=None, max_steps=None, force=False):
-    """Write the deck folder `out` for engine/format `to` from `source`; returns its deck.json dict.
+def export(source, to, out, variant=None, overrides=None, progress=None, max_steps=None, force=False, blocks=False):
+    """Write the deck folder `out` for engine/format `to` from `source`; returns its deck.json dict. `blocks`: the
+    source is an sgim scene whose block model (dda/georun.py) is exported, not its spheres.
 
     `out` must be new, empty or hold an earlier `adapters export` deck, which `force` replaces (only the files
     that export wrote; files added by hand stay): sgim/outdir.py. Anything else is refused before any work.
@@ -149,15 +150,26 @@ def export(source, to, out, variant=None, overrides=None, progress=None, max_ste
     A yade or liggghts deck whose steps (duration / dt) pass the step limit (`max_steps`, the --max-steps
     value, else the DDA scene's [simulation] max_steps, else 1e8; dda/limits.py) is refused before the folder
     is made."""
-    target = _export_target(to, variant, overrides)
+    if blocks:
+        if not (Path(source).suffix.lower() == ".toml" and Path(source).is_file() and _toml_kind(source) == "sgim"):
+            raise DeckError(f"{source}: --blocks takes an sgim scene (.toml with [domain])")
+        target = registry.for_export(to, "blocks")
+        if target is None:
+            names = ", ".join(t.to for t in registry.TARGETS if t.source == "blocks")
+            raise DeckError(f"{source}: --blocks exports to {names} (Polyhedra) only, not {to}")
+    else:
+        target = _export_target(to, variant, overrides)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise DeckError(f"{out}: output exists and is not a folder")
     dest = output_folder(out, "adapters export", force=force, say=progress)
-    try:
-        kind, run, model = load_source(source, overrides, max_steps=max_steps, limit_steps=target.runnable)
-    except SpecError as exc:
-        raise DeckError(str(exc)) from None
+    if blocks:
+        kind, run, model = "blocks", None, None  # an sgim scene's block model (dda/georun.py), not its spheres
+    else:
+        try:
+            kind, run, model = load_source(source, overrides, max_steps=max_steps, limit_steps=target.runnable)
+        except SpecError as exc:
+            raise DeckError(str(exc)) from None
     if kind != target.source:  # a block scene: the target of `to` for blocks, if there is one
         target = registry.for_export(to, kind)
         if target is None:

@@ -96,10 +96,8 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
     `dt`, `duration`, `record_every`, `young` override the scene's values (young: the YADE PolyhedraMat
     modulus, default from [contact] kn as in the module docstring). `scene`: the DDAScene of `scene_path` when
     already loaded; `max_steps`: the step limit (polyhedra_steps)."""
-    from dda.scene import load_scene  # lazy: dda.scene loads numba (this module stays light for the registry)
-
     scene_path = Path(scene_path)
-    scene = scene if scene is not None else load_scene(scene_path)
+    scene = scene if scene is not None else _load_scene(scene_path)
     if scene.spheres:
         raise SceneError(scene_path, "spheres", scene.spheres.get("path"),
                          "a polyhedra deck takes blocks only (use the sphere deck for [spheres])")
@@ -144,6 +142,9 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
     approx = list(APPROXIMATIONS)
     if any(int(getattr(b, "dof", 6)) == 12 for b in scene.blocks):
         approx.append("deformable blocks (dof 12) run rigid")
+    if getattr(scene, "model", None) is not None:  # an sgim scene's block model (dda/georun.py)
+        approx.append("the face-kind laws (joint, intact rock, fault: [blocks], [[blocks.law]]) are not carried "
+                      "over: every contact uses [blocks] kn, ks and the intact friction, without cohesion")
     if scene.pair_laws:
         approx.append("[[contact_pair]] laws are not carried over: every contact uses [contact]")
     if law.damping > 0:
@@ -159,13 +160,21 @@ def write_polyhedra_deck(scene_path, folder, *, dt=None, duration=None, record_e
             "approximations": approx}
 
 
+def _load_scene(scene_path):
+    """The DDAScene of a DDA block scene, or of an sgim scene's block model (dda/georun.py: cut into blocks, the
+    domain's side and bottom blocks fixed, [blocks.run] the run settings)."""
+    # lazy: dda.scene and dda.georun load numba (this module stays light for the registry)
+    from dda.georun import is_sgim_scene, load_geo_scene
+    from dda.scene import load_scene
+
+    return load_geo_scene(scene_path) if is_sgim_scene(scene_path) else load_scene(scene_path)
+
+
 def prepare_deck(scene_path, overrides=None, max_steps=None):
     """The registry's check before the deck folder is made (adapters/registry.py): the DDA scene read, and the
     deck's dt and duration (`overrides` duration, dt, record_every; polyhedra_steps refuses a run past the step
     limit). Returns (scene, keywords of write_polyhedra_deck)."""
-    from dda.scene import load_scene  # lazy: as in write_polyhedra_deck
-
-    scene = load_scene(scene_path)
+    scene = _load_scene(scene_path)
     ov = {k: v for k, v in (overrides or {}).items() if k in ("duration", "dt", "record_every") and v is not None}
     ov["dt"], ov["duration"] = polyhedra_steps(scene, scene_path, ov.get("dt"), ov.get("duration"), max_steps)
     return scene, ov

@@ -32,6 +32,8 @@ from .blockcut import face_planes
 from .contactlaw import ContactLaw
 from .geoblocks import DOMAIN, EXCAVATION, INTACT, build_blocks, default_spec
 from .limits import check_block_run
+from .polyhedra import PolyhedronError, check_convex
+from .polyhedra import face_planes as poly_planes
 from .scene import OUTPUT_FORMATS, DDAScene, Material
 from .simulation import Simulation
 from .system import quat_to_matrix
@@ -156,6 +158,27 @@ def boundary_fixed(model, sides=("x-", "x+", "y-", "y+", "z-")):
     return out
 
 
+def _snap_convex(spec, rel=1e-10, rounds=8):
+    """Move each vertex of `spec` that lies in front of a face plane back onto it (the cutter's blocks are convex
+    within about 1e-9 of their size, the engine checks 1e-9: dda.polyhedra.check_convex); True when the block then
+    passes that check. The face order, and so the faces' sources, stay as they are."""
+    v = np.asarray(spec.vertices, float).copy()
+    size = float(np.max(np.ptp(v, axis=0))) or 1.0
+    for _ in range(rounds):
+        n, d = poly_planes(v, spec.faces)
+        dist = v @ n.T - d
+        if dist.max() <= rel * size:
+            spec.vertices = v
+            return True
+        v -= np.clip(dist, 0.0, None) @ n
+    try:
+        check_convex(v, spec.faces)
+    except PolyhedronError:
+        return False
+    spec.vertices = v
+    return True
+
+
 def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoScene:
     """The GeoScene of an sgim Scene (sgim.scene.load_scene): its block model (built unless `model` is given),
     the boundary blocks fixed (or the blocks flagged in `fixed`), [blocks.run] as the run settings."""
@@ -168,8 +191,11 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
     model = model if model is not None else build_blocks(scene, progress=progress)
     fix = boundary_fixed(model, run["fixed"]) if fixed is None else np.asarray(fixed, bool)
     specs = model.specs()
-    for s, f in zip(specs, fix):
+    for k, (s, f) in enumerate(zip(specs, fix)):
         s.fixed = bool(f)
+        if not _snap_convex(s):
+            raise SceneError(path, "blocks", f"block {k}", "a cut block is not convex within 1e-9 of its size "
+                                                           "after snapping its vertices onto its face planes")
     if fix.all():
         raise SceneError(path, "blocks.run.fixed", run["fixed"], "every block of the block model has a face on "
                                                                   "these domain faces: nothing would move")
