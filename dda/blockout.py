@@ -17,6 +17,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from sgim.common import FORCE_HELP, CliError, progress_printer
 from sgim.outdir import output_folder
 from sgim.scene import load_scene
@@ -40,6 +42,8 @@ def cmd_blocks(args):
         raise CliError(f"{args.scene}: {exc}") from None
     with dest.assemble() as tmp:
         summary = write_blocks(model, tmp)
+        if args.png:
+            render_blocks(model, tmp / "blocks.png", title=f"{scene.name}: {summary['blocks']} blocks")
     if args.json:
         print(json.dumps(summary, indent=2))
     elif not args.quiet:
@@ -55,6 +59,51 @@ def add_blocks_parser(sub):
     b.add_argument("-o", "--output", required=True, help="output folder")
     b.add_argument("--quiet", action="store_true", help="no progress lines")
     b.add_argument("--json", action="store_true", help="print summary.json to stdout")
+    b.add_argument("--png", action="store_true", help="also blocks.png: the faces in the sphere picture's colours")
     b.add_argument("--force", action="store_true", help=FORCE_HELP)
     b.set_defaults(func=cmd_blocks)
     return b
+
+
+# the sphere picture's colours (sgim/render.py COLOURS): rock, fault red, joint faces green / blue by source
+ROCK, FAULT_RGB, GREEN, BLUE = (0.80, 0.74, 0.60), (0.86, 0.08, 0.08), (0.10, 0.68, 0.18), (0.12, 0.30, 0.92)
+INTACT_RGB = (0.60, 0.60, 0.62)
+
+
+def face_colours(model, tris_owner_block, tris_owner_face, centroids):
+    """RGB per triangle of the block mesh: a fault's face red, a joint's face green or blue (by its source's
+    index, so that neighbouring sets differ), intact rock grey, the domain's and excavation faces the rock's
+    colour; a disc's (triangle's) face takes its kind at the triangle's centroid (joint inside, intact outside)."""
+    from .geoblocks import DOMAIN, EXCAVATION, FAULT, INTACT  # not at the top: loads the cutting kernels
+
+    rgb = np.empty((len(centroids), 3))
+    for t, (i, f, c) in enumerate(zip(tris_owner_block, tris_owner_face, centroids)):
+        src = int(model.blocks[i].src[f])
+        kind = int(model.point_kinds(int(i), int(f), c)[0])
+        rgb[t] = {DOMAIN: ROCK, EXCAVATION: ROCK, INTACT: INTACT_RGB, FAULT: FAULT_RGB}.get(
+            kind, GREEN if src % 2 == 0 else BLUE)
+    return rgb
+
+
+def render_blocks(model, path, width=1600, height=1100, title=None):
+    """blocks.png: the block model's faces in the sphere picture's colours (face_colours), edges drawn."""
+    import pyvista as pv  # not at the top: pyvista loads only when a picture is drawn
+
+    from sgim.render import Frame
+
+    from .geoblocks import block_mesh
+
+    pts, tris, data, _ = block_mesh(model)
+    cen = pts[tris].mean(1)
+    rgb = face_colours(model, data["block"], data["face"], cen)
+    mesh = pv.PolyData(pts, np.hstack([np.full((len(tris), 1), 3), tris]).astype(np.int64))
+    mesh.cell_data["rgb"] = (rgb * 255).astype(np.uint8)
+    frame = Frame(width, height, title)
+    frame.fit(model.lo, model.hi, azimuth=-60.0, elevation=25.0)
+    frame.axes(model.lo, model.hi)
+    frame.pl.add_mesh(mesh, scalars="rgb", rgb=True, show_edges=True, edge_color="black", line_width=0.3)
+    for label, c in (("joint faces", GREEN), ("joint faces (next set)", BLUE), ("fault", FAULT_RGB),
+                     ("intact rock", INTACT_RGB), ("free surface / domain", ROCK)):
+        frame.add_legend_entry(label, c)
+    frame.save(path)
+    frame.close()
