@@ -81,8 +81,8 @@ def approximations(run):
     """What the in-house engine does not represent of `run`: strings naming the scene key (RunResult.extra):
     every key of a run (bonds, joints, loads, contact, local, viscous and bond damping), and the joint walls when
     run.extra joint_walls asks for them."""
-    return liggghts_only(run) + jw.notes(run, "a fixed convex slab (sphere-polyhedron contact at its closest point, "
-                                              "the contact law of the spheres)")
+    return liggghts_only(run) + jw.notes(run, "a fixed convex slab (the spheres' contact law at "
+                                              "its closest point)")
 
 
 def wall_slabs(run, planes=None):

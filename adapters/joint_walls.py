@@ -202,9 +202,9 @@ def notes(run, how, planes=None):
     fixed = np.asarray(run.fixed, bool)
     mixed = int(np.sum(fixed[run.joint_i] != fixed[run.joint_j]))
     radii = mode(run)[0] == "pairs"
-    return [f"{mode(run)[1]}: the fixed side of {len(planes)} joint(s) is {how} (friction spheres.joint_friction = "
-            f"{run.joint_friction_deg:g} deg, no cohesion) touching the nearest free sphere of its {mixed} fixed-free "
-            f"joint pairs; the {gone} fixed spheres behind the walls take part in no contact. The wall is a flat "
+    return [f"{mode(run)[1]}: the fixed side of {len(planes)} joint(s) is {how}, with friction "
+            f"spheres.joint_friction = {run.joint_friction_deg:g} deg and no cohesion, touching the nearest free sphere "
+            f"of its {mixed} fixed-free joint pairs; the {gone} fixed spheres behind the walls take part in no contact. The wall is a flat "
             "surface where the smooth joint is a plane between sphere pairs: "
             + ("every free sphere of those pairs touches it (contact radius = its centre's distance to the nearest "
                "wall, masses kept)" if radii else

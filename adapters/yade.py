@@ -93,7 +93,7 @@ def approximations(run: SphereRun):
         out.append("a smooth joint slid 2 min(r) along the joint is switched off at once, and erased (a plain "
                    "contact from then on) at the next record; in-house it is a plain contact from the next step")
     planes = jw.wall_planes(run)
-    out += jw.notes(run, "a YADE facet (Ig2_Facet_Sphere_ScGeom, the JCFpm law: kn, ks of the run)", planes)
+    out += jw.notes(run, "a YADE facet (Ig2_Facet_Sphere_ScGeom, the JCFpm law at the run's kn and ks)", planes)
     if planes and run.joint_friction_deg > run.friction_deg:
         out.append(f"spheres.joint_friction = {run.joint_friction_deg:g} deg on the joint walls is "
                    f"{run.friction_deg:g} deg (contact.friction): JCFpm's Ip2 takes the smaller friction angle of "
