@@ -185,6 +185,7 @@ def table(rows):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="the 4.5 m cube only")
+    ap.add_argument("--large", action="store_true", help="the 10 m cube only")
     ap.add_argument("--repeats", type=int, default=3, help="counted builds per case (default 3; medians)")
     ap.add_argument("--repo", default=str(REPO), help="the checkout whose sgim is run (default: this one)")
     ap.add_argument("--json", help="also write the results to this JSON file")
@@ -207,7 +208,7 @@ def main(argv=None):
     if not (repo / "sgim" / "cli.py").is_file():
         raise SystemExit(f"--repo = {args.repo!r}: no sgim/cli.py there")
     rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True).stdout
-    cubes = CUBES[:1] if args.quick else CUBES
+    cubes = CUBES[:1] if args.quick else CUBES[1:] if args.large else CUBES
     with tempfile.TemporaryDirectory(prefix="bench_picture_") as d:
         rows = [run_case(repo, Path(d), name, side, args.repeats) for name, side in cubes]
     print(f"Default `sgim build` of equal random spheres (r = 0.05 m) at {rev.strip() or repo}, medians of "
