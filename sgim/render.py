@@ -59,6 +59,21 @@ def offscreen_vtk():
         os.environ.pop(VTK_WINDOW, None)
 
 
+def _vtk():
+    """The VTK classes the frame draws with, taken from their own modules (``import vtk`` loads every module of
+    VTK: seconds on a busy machine; pyvista's plotting has loaded the text and OpenGL renderers they need)."""
+    from types import SimpleNamespace
+
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData, vtkPolyLine
+    from vtkmodules.vtkFiltersSources import vtkRegularPolygonSource
+    from vtkmodules.vtkRenderingCore import vtkActor2D, vtkPolyDataMapper2D, vtkTextActor
+
+    return SimpleNamespace(vtkPoints=vtkPoints, vtkCellArray=vtkCellArray, vtkPolyData=vtkPolyData,
+                           vtkPolyLine=vtkPolyLine, vtkRegularPolygonSource=vtkRegularPolygonSource,
+                           vtkActor2D=vtkActor2D, vtkPolyDataMapper2D=vtkPolyDataMapper2D, vtkTextActor=vtkTextActor)
+
+
 CUT_COLOUR = np.array([0.95, 0.45, 0.05])  # orange: where spheres were cut away
 COLOUR_LABELS = ("intact rock", "fault (red)", "joint, green side", "joint, blue side")
 
@@ -196,7 +211,7 @@ class Frame:
         vertical edge along z): ticks at round values, labels in metres and titles 'x [m]' ... placed outside
         the box on screen. Call after :meth:`fit`."""
         import pyvista as pv
-        import vtk
+        vtk = _vtk()
 
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
         self.pl.add_mesh(pv.Box(bounds=(lo[0], hi[0], lo[1], hi[1], lo[2], hi[2])), style="wireframe",
@@ -270,7 +285,7 @@ class Frame:
         self.legend.append((label, np.asarray(rgb, float)))
 
     def _panel_text(self, text, y_px, size=None, color="black"):
-        import vtk
+        vtk = _vtk()
 
         t = vtk.vtkTextActor()
         t.SetInput(text)
@@ -290,7 +305,7 @@ class Frame:
 
     def _disc_actor(self, x, y, radius, rgb):
         """A filled disc of `radius` pixels at pixel (x, y) (a legend swatch)."""
-        import vtk
+        vtk = _vtk()
 
         src = vtk.vtkRegularPolygonSource()
         src.SetNumberOfSides(24)
@@ -339,7 +354,7 @@ class Frame:
 
     def _scale_bar(self):
         """A bar of a round length [m] drawn to the picture's scale (exact: the camera is parallel)."""
-        import vtk
+        vtk = _vtk()
 
         max_px = 0.7 * (self.panel_px - self.fs)
         L = _nice_length(max_px * self.scale)
@@ -371,7 +386,7 @@ class Frame:
     def save(self, path):
         """Title, legend and scale bar drawn; the picture written to `path` (temporary name, then renamed)."""
         if self.title:
-            import vtk
+            vtk = _vtk()
 
             t = vtk.vtkTextActor()
             t.SetInput(self.title)
