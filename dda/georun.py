@@ -33,6 +33,7 @@ from .contactlaw import ContactLaw
 from .geoblocks import DOMAIN, EXCAVATION, INTACT, build_blocks, default_spec
 from .limits import check_block_run
 from .polyhedra import PolyhedronError, check_convex
+from .shapes import GeometryError, convex_hull
 from .polyhedra import face_planes as poly_planes
 from .scene import OUTPUT_FORMATS, DDAScene, Material
 from .simulation import Simulation
@@ -69,15 +70,18 @@ class GeoScene(DDAScene):
 
     model = None
     spec = None
-    face_src = None  # per block, its faces' sources (the model's)
+    face_src = None  # per block, its faces' sources (the model's; a hulled block's matched by plane)
+    left_out = (0, 0.0)  # (blocks, m3) left out of the run: needles the engine's convexity check refuses even as hulls
+    small_fixed = 0  # blocks below [blocks] min_volume held fixed (they would set the time step)
+    hulled = 0  # blocks replaced by their convex hull (not convex within the engine's tolerance after snapping)
 
     def law_rows(self):
         """{row name: ContactLaw}: the intact row and one per law name that made a face."""
         sp = self.spec
         rows = {INTACT_ROW: ContactLaw(kn=sp.kn, ks=sp.ks, friction_deg=sp.friction, cohesion=sp.cohesion,
                                        tensile=sp.tensile, damping=sp.damping)}
-        for b in self.model.blocks:
-            for s in set(b.src.tolist()):
+        for src in self.face_src:
+            for s in set(np.asarray(src).tolist()):
                 kind = self.model.sources[s].kind
                 if kind in (DOMAIN, EXCAVATION, INTACT):
                     continue
@@ -94,10 +98,10 @@ class GeoScene(DDAScene):
         shape = np.zeros(nf, np.int64)
         geo = np.zeros((nf, 9))
         intact = names.index(INTACT_ROW)
-        for i, b in enumerate(self.model.blocks):
+        for i, src_i in enumerate(self.face_src):
             R = quat_to_matrix(A.quat[i])
             f0 = int(A.face_start[i])
-            for k, s in enumerate(b.src.tolist()):
+            for k, s in enumerate(np.asarray(src_i).tolist()):
                 src = self.model.sources[s]
                 if src.kind in (DOMAIN, EXCAVATION):
                     continue
@@ -143,6 +147,8 @@ class GeoScene(DDAScene):
         free = ~np.asarray(sim.A.fixed, bool)
         return {"blocks_moved": int((d[free] > moved).sum()), "moved_threshold_m": moved,
                 "fixed_blocks": int((~free).sum()), "max_displacement_m": float(d[free].max()) if free.any() else 0.0,
+                "blocks_hulled": self.hulled, "small_blocks_fixed": self.small_fixed, "blocks_left_out": self.left_out[0],
+                "volume_left_out_m3": self.left_out[1],
                 "cut": {k: v for k, v in self.model.summary().items() if k != "seconds"}}
 
 
@@ -158,7 +164,7 @@ def boundary_fixed(model, sides=("x-", "x+", "y-", "y+", "z-")):
     return out
 
 
-def _snap_convex(spec, rel=1e-10, rounds=8):
+def _snap_convex(spec, rel=3e-10, rounds=60):
     """Move each vertex of `spec` that lies in front of a face plane back onto it (the cutter's blocks are convex
     within about 1e-9 of their size, the engine checks 1e-9: dda.polyhedra.check_convex); True when the block then
     passes that check. The face order, and so the faces' sources, stay as they are."""
@@ -179,6 +185,22 @@ def _snap_convex(spec, rel=1e-10, rounds=8):
     return True
 
 
+def _hull_of(spec, block, path, k):
+    """(spec, face sources) of the convex hull of a block that snapping left non-convex (a sliver of an exact
+    excavation, e.g. 2e-5 m3 in the open pit): each hull face takes the source of the block's face whose plane is
+    nearest (its normal's direction first)."""
+    try:
+        h = convex_hull(spec.vertices, tol=1e-13, name=spec.name, material=spec.material, fixed=spec.fixed)
+    except GeometryError as exc:
+        raise SceneError(path, "blocks", f"block {k}", f"a cut block is not convex and has no hull ({exc})") \
+            from None
+    h.faces = [[f[0], f[j], f[j + 1]] for f in h.faces for j in range(1, len(f) - 1)]  # exact facet planes
+    n0, d0 = poly_planes(np.asarray(spec.vertices, float), spec.faces)
+    n1, d1 = poly_planes(np.asarray(h.vertices, float), h.faces)
+    match = np.argmax(n1 @ n0.T - 1e-3 * np.abs(d1[:, None] - d0[None, :]), axis=1)
+    return h, np.asarray(block.src)[match]
+
+
 def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoScene:
     """The GeoScene of an sgim Scene (sgim.scene.load_scene): its block model (built unless `model` is given),
     the boundary blocks fixed (or the blocks flagged in `fixed`), [blocks.run] as the run settings."""
@@ -190,12 +212,26 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
                                                             "block model for [blocks.run] duration (s)")
     model = model if model is not None else build_blocks(scene, progress=progress)
     fix = boundary_fixed(model, run["fixed"]) if fixed is None else np.asarray(fixed, bool)
+    # blocks below [blocks] min_volume that no neighbour could take (pieces of the exact excavation, down to
+    # 1e-5 m3 in the open pit) would set the time step (1e-9 s in the open pit): they stay fixed, and are counted
+    small = (model.volumes() < spec.min_volume) & ~fix if fixed is None else np.zeros(len(fix), bool)
+    fix = fix | small
     specs = model.specs()
+    face_src = [b.src for b in model.blocks]
+    hulled, left_out = 0, []
     for k, (s, f) in enumerate(zip(specs, fix)):
         s.fixed = bool(f)
         if not _snap_convex(s):
-            raise SceneError(path, "blocks", f"block {k}", "a cut block is not convex within 1e-9 of its size "
-                                                           "after snapping its vertices onto its face planes")
+            specs[k], face_src[k] = _hull_of(s, model.blocks[k], path, k)
+            hulled += 1
+            try:
+                check_convex(specs[k].vertices, specs[k].faces)
+            except PolyhedronError:  # a needle below the engine's convexity tolerance even as a hull
+                left_out.append(k)
+    if left_out:  # said in the summary (blocks_left_out, their volume), never silently
+        keep = np.setdiff1d(np.arange(len(specs)), left_out)
+        lost = float(sum(model.blocks[k].volume() for k in left_out))
+        specs, face_src, fix = [specs[k] for k in keep], [face_src[k] for k in keep], fix[keep]
     if fix.all():
         raise SceneError(path, "blocks.run.fixed", run["fixed"], "every block of the block model has a face on "
                                                                   "these domain faces: nothing would move")
@@ -207,7 +243,9 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
                   gravity=np.asarray(run["gravity"], float), local_damping=run["local_damping"],
                   record_every=run["record_every"] or duration / 100, frames=run["frames"],
                   formats=OUTPUT_FORMATS, sources=["blocks"] * len(specs), sleep={"sleep": run["sleep"]})
-    gs.model, gs.spec = model, spec
+    gs.model, gs.spec, gs.face_src, gs.hulled = model, spec, face_src, hulled
+    gs.left_out = (len(left_out), lost if left_out else 0.0)
+    gs.small_fixed = int(small.sum())
     return gs
 
 
