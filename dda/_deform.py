@@ -115,30 +115,31 @@ def strain_tensor(e, Et):
     Et[0, 1] = Et[1, 0] = 0.5 * e[5]
 
 
-@njit(cache=True)
-def _inv3(A, out):
-    d = (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
-         + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
-    out[0, 0] = (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) / d
-    out[0, 1] = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) / d
-    out[0, 2] = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) / d
-    out[1, 0] = (A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]) / d
-    out[1, 1] = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) / d
-    out[1, 2] = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) / d
-    out[2, 0] = (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]) / d
-    out[2, 1] = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) / d
-    out[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) / d
+@njit(cache=True, inline="always")
+def stretch_inverse(strain, i):
+    """(I + E)^-1 of block i's strains (E the strain tensor of strain[i]) as nine scalars, row by row: no array
+    is made or called with, so it costs nothing in reference counts where it is inlined per contact point."""
+    a00 = strain[i, 0] + 1.0
+    a11 = strain[i, 1] + 1.0
+    a22 = strain[i, 2] + 1.0
+    a12 = 0.5 * strain[i, 3]
+    a02 = 0.5 * strain[i, 4]
+    a01 = 0.5 * strain[i, 5]
+    a21, a20, a10 = a12, a02, a01
+    d = (a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20))
+    return ((a11 * a22 - a12 * a21) / d, (a02 * a21 - a01 * a22) / d, (a01 * a12 - a02 * a11) / d,
+            (a12 * a20 - a10 * a22) / d, (a00 * a22 - a02 * a20) / d, (a02 * a10 - a00 * a12) / d,
+            (a10 * a21 - a11 * a20) / d, (a01 * a20 - a00 * a21) / d, (a00 * a11 - a01 * a10) / d)
 
 
 @njit(cache=True)
 def deform_geometry(i, pos, R, strain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb):
     """World vertices x = x0 + R (I + E) X, face planes (normal (I + E)^-1 n, turned by R) and box of block i."""
     F = np.empty((3, 3))
-    Fi = np.empty((3, 3))
     strain_tensor(strain[i], F)
     for a in range(3):
         F[a, a] += 1.0
-    _inv3(F, Fi)
+    i00, i01, i02, i10, i11, i12, i20, i21, i22 = stretch_inverse(strain, i)
     G = np.empty((3, 3))  # R F
     for a in range(3):
         for b in range(3):
@@ -154,60 +155,60 @@ def deform_geometry(i, pos, R, strain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw,
                 aabb[i, a] = x
             if x > aabb[i, 3 + a]:
                 aabb[i, 3 + a] = x
-    nb = np.empty(3)
     for f in range(fs[i], fs[i + 1]):
         # F^-T n = F^-1 n (F symmetric); n' . F X = n . X on the face, so d' = dloc / |F^-1 n|
-        ln = 0.0
-        for a in range(3):
-            nb[a] = Fi[a, 0] * nloc[f, 0] + Fi[a, 1] * nloc[f, 1] + Fi[a, 2] * nloc[f, 2]
-            ln += nb[a] * nb[a]
+        nb0 = i00 * nloc[f, 0] + i01 * nloc[f, 1] + i02 * nloc[f, 2]
+        nb1 = i10 * nloc[f, 0] + i11 * nloc[f, 1] + i12 * nloc[f, 2]
+        nb2 = i20 * nloc[f, 0] + i21 * nloc[f, 1] + i22 * nloc[f, 2]
+        ln = nb0 * nb0 + nb1 * nb1 + nb2 * nb2
         ln = np.sqrt(ln)
         d = dloc[f] / ln
         for a in range(3):
-            nn = (R[a, 0] * nb[0] + R[a, 1] * nb[1] + R[a, 2] * nb[2]) / ln
+            nn = (R[a, 0] * nb0 + R[a, 1] * nb1 + R[a, 2] * nb2) / ln
             fnw[f, a] = nn
             d += nn * pos[i, a]
         fdw[f] = d
 
 
-# inlined: called per contact point (dda/_kinematics.py says why)
+# inlined: called per contact point, without arrays of its own or calls (dda/_kinematics.py says why)
 @njit(cache=True, inline="always")
-def body_point(i, p, pos, R, strain, X):
-    """Undeformed body offset X of the world point p of block i: X = (I + E)^-1 R^T (p - x0)."""
-    F = np.empty((3, 3))
-    Fi = np.empty((3, 3))
-    strain_tensor(strain[i], F)
-    for a in range(3):
-        F[a, a] += 1.0
-    _inv3(F, Fi)
+def body_offset(i, p, pos, R, strain):
+    """Undeformed body offset X = (I + E)^-1 R^T (p - x0) of the world point p of block i, as three scalars."""
+    i00, i01, i02, i10, i11, i12, i20, i21, i22 = stretch_inverse(strain, i)
     y0 = p[0] - pos[i, 0]
     y1 = p[1] - pos[i, 1]
     y2 = p[2] - pos[i, 2]
     b0 = R[0, 0] * y0 + R[1, 0] * y1 + R[2, 0] * y2
     b1 = R[0, 1] * y0 + R[1, 1] * y1 + R[2, 1] * y2
     b2 = R[0, 2] * y0 + R[1, 2] * y1 + R[2, 2] * y2
-    for a in range(3):
-        X[a] = Fi[a, 0] * b0 + Fi[a, 1] * b1 + Fi[a, 2] * b2
+    return i00 * b0 + i01 * b1 + i02 * b2, i10 * b0 + i11 * b1 + i12 * b2, i20 * b0 + i21 * b1 + i22 * b2
 
 
 # inlined: called per contact point (dda/_kinematics.py says why)
 @njit(cache=True, inline="always")
-def point_velocity(i, p, pos, quat_R, strain, srate, wb, out):
+def body_point(i, p, pos, R, strain, X):
+    """body_offset into X."""
+    X[0], X[1], X[2] = body_offset(i, p, pos, R, strain)
+
+
+# inlined: called per contact point, without arrays of its own or calls (dda/_kinematics.py says why)
+@njit(cache=True, inline="always")
+def point_velocity(i, p, pos, R, strain, srate, wb, out):
     """Velocity of the world point p of deformable block i relative to its centroid: w x (p - x0) + R Edot X."""
-    X = np.empty(3)
-    body_point(i, p, pos, quat_R, strain, X)
-    Ed = np.empty((3, 3))
-    strain_tensor(srate[i], Ed)
-    R = quat_R
+    X0, X1, X2 = body_offset(i, p, pos, R, strain)
+    # Edot X, Edot the strain-rate tensor of srate[i] (engineering shear rates halved)
+    h3 = 0.5 * srate[i, 3]
+    h4 = 0.5 * srate[i, 4]
+    h5 = 0.5 * srate[i, 5]
     w0 = R[0, 0] * wb[i, 0] + R[0, 1] * wb[i, 1] + R[0, 2] * wb[i, 2]
     w1 = R[1, 0] * wb[i, 0] + R[1, 1] * wb[i, 1] + R[1, 2] * wb[i, 2]
     w2 = R[2, 0] * wb[i, 0] + R[2, 1] * wb[i, 1] + R[2, 2] * wb[i, 2]
     rx = p[0] - pos[i, 0]
     ry = p[1] - pos[i, 1]
     rz = p[2] - pos[i, 2]
-    u0 = Ed[0, 0] * X[0] + Ed[0, 1] * X[1] + Ed[0, 2] * X[2]
-    u1 = Ed[1, 0] * X[0] + Ed[1, 1] * X[1] + Ed[1, 2] * X[2]
-    u2 = Ed[2, 0] * X[0] + Ed[2, 1] * X[1] + Ed[2, 2] * X[2]
+    u0 = srate[i, 0] * X0 + h5 * X1 + h4 * X2
+    u1 = h5 * X0 + srate[i, 1] * X1 + h3 * X2
+    u2 = h4 * X0 + h3 * X1 + srate[i, 2] * X2
     out[0] = w1 * rz - w2 * ry + R[0, 0] * u0 + R[0, 1] * u1 + R[0, 2] * u2
     out[1] = w2 * rx - w0 * rz + R[1, 0] * u0 + R[1, 1] * u1 + R[1, 2] * u2
     out[2] = w0 * ry - w1 * rx + R[2, 0] * u0 + R[2, 1] * u1 + R[2, 2] * u2
@@ -349,5 +350,5 @@ def deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces):
 
 
 __all__ = ["t_matrix", "elastic_matrix", "second_moments", "mass_matrix", "stiffness_matrix", "block_matrices",
-           "critical_omega2", "deform_geometry", "deform_step", "point_velocity", "body_point", "add_strain_force",
-           "strain_tensor"]
+           "critical_omega2", "deform_geometry", "deform_step", "point_velocity", "body_point", "body_offset",
+           "add_strain_force", "strain_tensor", "stretch_inverse"]

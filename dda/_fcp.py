@@ -310,7 +310,9 @@ def _edge_crossing(vert, he_origin, he_next, scr, na, va0, vb0, ha, hb, P):
     return True
 
 
-@njit(cache=True, inline="always")
+# not inlined: it calls _crease_covered, and the arrays an inlined kernel takes are counted in and out around
+# every call it makes (dda/_narrow.py's docstring); it runs only for crossings that bear
+@njit(cache=True)
 def _crossing_covered(vert, fnw, fdw, he_origin, he_next, ha, hb, n, fa0, fa1, fb0, fb1, tol, lat, overlap):
     """A crossing of edges ha (A) and hb (B) next to a vertex that bears by the crease rule is that vertex's
     contact."""

@@ -30,7 +30,7 @@ from numba import njit
 from ._broad import build_grid, buckets_for, find_pairs, inside_cells, map_cells, n_cells
 from ._deform import deform_geometry, deform_step
 from ._fcp import MAXP
-from ._kinematics import ang_vel, quat_matrix, turn
+from ._kinematics import ang_vel, quat_matrix, turn, turned
 from ._narrow import carry_resting, hash_pairs, narrow_phase
 from ._state import (ACC_DRIVER, ACC_SLEEPING, C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE,
                      E_DAMPING, E_ELASTIC, E_FRICTION, E_KIN, E_LOCAL, E_POT, NCOUNT, NTALLY, ST_AWAKE,
@@ -334,13 +334,14 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
                 calm[i] += 1
             else:
                 calm[i] = 0
-        # mid-step orientation predictor, then the full turn
-        turn(quat[i], w_new, 0.5 * dt, qh)
+        # mid-step orientation predictor, then the full turn (turned: scalars, so that no array is counted in
+        # and out per block around its branch)
+        qh[0], qh[1], qh[2], qh[3] = turned(quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3], w_new[0], w_new[1],
+                                            w_new[2], 0.5 * dt)
         quat_matrix(qh, R)
         ang_vel(R, inertia[i], Lnew, w_new)
-        turn(quat[i], w_new, dt, qh)
-        for a in range(4):
-            quat[i, a] = qh[a]
+        quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3] = turned(quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3],
+                                                                w_new[0], w_new[1], w_new[2], dt)
         for a in range(3):
             angmom[i, a] = Lnew[a]
             pos[i, a] += dt * vel[i, a]

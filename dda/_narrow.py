@@ -4,18 +4,22 @@ For each candidate pair (i, j) of the broad phase (``narrow_phase``):
 
 1. last step's record of the pair (a hash table on the pair key, ``hash_pairs``);
 2. the common plane: last step's plane (or the centroids' line) is checked first (a positive gap along it proves
-   the blocks apart); else ``search_plane``: the Fast Common-Plane search, confirmed by the separating-axis
-   search for a new or deep overlap;
-3. the contact points on that plane (dda/_fcp.py's contact_points, ``with_midpoint``: plus the support points'
-   midpoint when no point represents the plane's overlap);
-4. the contact law at each point (``pair_forces``): shear history of the same feature from last step, relative
-   velocity, dda/_contact.py's point_force, the force and torque on both blocks, the point's new record.
+   the blocks apart); else the Fast Common-Plane search from it, confirmed by the separating-axis search for a new
+   or deep overlap;
+3. the contact points on that plane (dda/_fcp.py's contact_points, plus the support points' midpoint when no
+   point represents the plane's overlap);
+4. the contact law at each point: shear history of the same feature from last step, relative velocity,
+   dda/_contact.py's point_force, the force and torque on both blocks, the point's new record.
 
-Reference counts: numba increments and decrements the count of every array of a bundle handed to a kernel that
-is not inlined, at each call, when that kernel calls others; the stage kernels here therefore take the bundles
-once per step, take their arrays out before the loop over the pairs, and hand plain arrays (or their own bundle
-arguments, as they came) to the kernels they call per pair; the per-pair and per-point helpers are inlined, and
-the kernels these call per point too (dda/_kinematics.py, dda/_contact.py's point_force).
+Reference counts: numba increments the count of an array when a variable takes it (an inlined helper's
+parameter, a view such as ``pos[i]``, an array taken out of a bundle) and decrements it after the variable's
+last use; its pruning pass removes such pairs only within one basic block or when no other decrement lies between
+them. A helper with array parameters and branches, or a bundle handed on, thus cost about 100 atomic count
+changes per touching pair. So narrow_phase takes its arrays out of the bundles once per step and writes the
+per-pair and per-point steps out in its own loops; the helpers it inlines there take scalars or are straight-line
+code, and the kernels it calls per pair take plain arrays (a non-inlined call borrows its arguments). The one
+helper left with array parameters and branches per point is point_force (4 arrays); a cut block model's face
+kinds add dda/_kinds.py's per point (their own runs only).
 
 Contacts between two resting blocks are carried over unchanged while sleeping is on (``carry_resting``).
 The step's sums (elastic energy, friction and damping work, deepest point) go to ``tally`` and its counts to
@@ -30,7 +34,7 @@ from ._contact import point_force
 from ._deform import add_strain_force, body_point, point_velocity
 from ._fcp import MAXP, contact_points, fcp, gap_along, polygon_area, sat_search
 from ._kinds import intact_share, law_face, near_history, point_row
-from ._kinematics import omega, quat_matrix
+from ._kinematics import quat_matrix, spin
 from ._state import (C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE, LAW_COH, LAW_KN, LAW_KS,
                      LAW_TANPHI, LAW_TEN, LAW_ZETA, T_DAMPING, T_ELASTIC, T_FRICTION, T_MAXDEPTH)
 
@@ -60,260 +64,69 @@ def hash_pairs(con, old):
     return hmask
 
 
-@njit(cache=True)
-def search_plane(i, j, new_or_open, vert, fnw, vs, fs, es, he_origin, he_next, he_pair, he_face, vert_he, edge_he,
-                 size, nrm, n_sat):
-    """The common plane of pair (i, j) when the start plane nrm (last step's, or the centroids' line) does not
-    prove the blocks apart: the Fast Common-Plane search from it, confirmed by the separating-axis search for a
-    deep overlap or, when `new_or_open` (no points last step), any overlap. The plane goes to nrm; returns (gap,
-    A's and B's support vertex, max_A x.n, min_B x.n, FCP iterations, 1 when the separating-axis search gave the
-    plane else 0). Plain arrays, not bundles: called once per pair that may touch."""
-    g, ia, ib, sa, sb, its = fcp(vert, fnw, vs[i], vs[i + 1], vs[j], vs[j + 1], he_origin, he_next, he_pair, he_face,
-                                 vert_he, nrm, 1e-13 * size, 50, nrm)
-    nsat = 0
-    if g < 0.0 and (new_or_open or g < -0.01 * size):
-        # a new or a deep overlap (more than 1 % of the smaller block): confirm the plane with the
-        # global separating-axis search (FCP's local search can stop on a poor plane)
-        for a in range(3):
-            n_sat[a] = nrm[a]
-        g2 = sat_search(vert, fnw, vs[i], vs[i + 1], fs[i], fs[i + 1], es[i], es[i + 1],
-                        vs[j], vs[j + 1], fs[j], fs[j + 1], es[j], es[j + 1], he_origin, he_next, edge_he, nrm, g,
-                        n_sat)
-        if g2 > g:
-            nsat = 1
-            for a in range(3):
-                nrm[a] = n_sat[a]
-            g, ia, ib, sa, sb = gap_along(vert, vs[i], vs[i + 1], vs[j], vs[j + 1], nrm[0], nrm[1], nrm[2])
-    return g, ia, ib, sa, sb, its, nsat
-
-
 @njit(cache=True, inline="always")
-def with_midpoint(k, sa, sb, ia, ib, vert, p_pos, p_depth, p_id):
-    """contact_points' k points (k < 0: none), plus the support points' midpoint when the plane's overlap
-    sa - sb is not represented: when no point found reaches half of it (tip against tip, or a penetration
-    through an edge that pierces a face, which the candidates do not include). Returns the count."""
-    if k < 0:
-        k = 0
-    maxd = 0.0
-    for q in range(k):
-        if p_depth[q] > maxd:
-            maxd = p_depth[q]
-    if sa - sb > 0.0 and maxd < 0.5 * (sa - sb) and k < MAXP:
-        p_depth[k] = sa - sb
-        p_id[k] = 0
-        for a in range(3):
-            p_pos[k, a] = 0.5 * (vert[ia, a] + vert[ib, a])
-        k += 1
-    return k
-
-
-@njit(cache=True, inline="always")
-def _effective_mass(i, j, kin, mass, static):
+def _effective_mass(kin_i, kin_j, static_j, m_i, m_j):
     """Mass of the contact's normal mode: the free block's when the other is fixed, asleep or prescribed."""
-    inj = static[j] or kin[j]
-    if kin[i] and inj:
-        return min(mass[i], mass[j])
-    if kin[i]:
-        return mass[j]
+    inj = static_j or kin_j
+    if kin_i and inj:
+        return min(m_i, m_j)
+    if kin_i:
+        return m_j
     if inj:
-        return mass[i]
-    return mass[i] * mass[j] / (mass[i] + mass[j])
+        return m_i
+    return m_i * m_j / (m_i + m_j)
 
 
 @njit(cache=True, inline="always")
-def _shear_history(npt_old, pid_old, us_old, bond_old, slot, pid, nrm, matched, us):
-    """Shear displacement of the same feature in last step's contact (rows of buffer `old`), turned onto the
-    current tangent plane keeping its length, into us; returns (found, bonded)."""
-    found = -1
-    if slot >= 0:
-        for r in range(npt_old[slot]):
-            if pid_old[slot, r] == pid:
-                found = r
-                break
-    if found < 0:
-        us[0] = 0.0
-        us[1] = 0.0
-        us[2] = 0.0
-        return False, False
-    matched[found] = True
-    us[0] = us_old[slot, found, 0]
-    us[1] = us_old[slot, found, 1]
-    us[2] = us_old[slot, found, 2]
-    bonded = bond_old[slot, found]
-    l0 = np.sqrt(us[0] * us[0] + us[1] * us[1] + us[2] * us[2])
-    un = us[0] * nrm[0] + us[1] * nrm[1] + us[2] * nrm[2]
-    for a in range(3):
-        us[a] -= un * nrm[a]
-    l1 = np.sqrt(us[0] * us[0] + us[1] * us[1] + us[2] * us[2])
+def _cross(a0, a1, a2, b0, b1, b2):
+    """a x b."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True, inline="always")
+def _onto_plane(u0, u1, u2, n0, n1, n2):
+    """The shear displacement u turned onto the plane of unit normal n, keeping its length."""
+    l0 = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    un = u0 * n0 + u1 * n1 + u2 * n2
+    u0 -= un * n0
+    u1 -= un * n1
+    u2 -= un * n2
+    l1 = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
     if l1 > 0.0:
-        for a in range(3):
-            us[a] *= l0 / l1
-    return True, bonded
+        u0 *= l0 / l1
+        u1 *= l0 / l1
+        u2 *= l0 / l1
+    return u0, u1, u2
 
 
 @njit(cache=True, inline="always")
-def _spin_velocity(j, P, pos, w, vrel, sign):
-    """vrel += sign * w x (P - x_j)."""
-    rx = P[0] - pos[j, 0]
-    ry = P[1] - pos[j, 1]
-    rz = P[2] - pos[j, 2]
-    vrel[0] += sign * (w[1] * rz - w[2] * ry)
-    vrel[1] += sign * (w[2] * rx - w[0] * rz)
-    vrel[2] += sign * (w[0] * ry - w[1] * rx)
-
-
-@njit(cache=True, inline="always")
-def _relative_velocity(i, j, P, pos, vel, quat, kin, fixed, dof12, wpres, inertia, angmom, strain, srate, wb,
-                       static, R, w, vrel):
-    """Velocity of B (= j) relative to A (= i) at the point P (half-step velocities) into vrel."""
-    for a in range(3):
-        vrel[a] = vel[j, a] - vel[i, a]
-    if not static[j] and dof12[j]:
-        quat_matrix(quat[j], R)
-        point_velocity(j, P, pos, R, strain, srate, wb, w)
-        for a in range(3):
-            vrel[a] += w[a]
-    elif not static[j]:
-        omega(j, kin, static, wpres, quat, inertia, angmom, R, w)
-        _spin_velocity(j, P, pos, w, vrel, 1.0)
-    if dof12[i]:
-        quat_matrix(quat[i], R)
-        point_velocity(i, P, pos, R, strain, srate, wb, w)
-        for a in range(3):
-            vrel[a] -= w[a]
-    elif not fixed[i]:
-        omega(i, kin, static, wpres, quat, inertia, angmom, R, w)
-        _spin_velocity(i, P, pos, w, vrel, -1.0)
-
-
-@njit(cache=True, inline="always")
-def _moment(j, P, pos, fpt, torque, sign):
-    """torque[j] += sign * (P - x_j) x fpt."""
-    rx = P[0] - pos[j, 0]
-    ry = P[1] - pos[j, 1]
-    rz = P[2] - pos[j, 2]
-    torque[j, 0] += sign * (ry * fpt[2] - rz * fpt[1])
-    torque[j, 1] += sign * (rz * fpt[0] - rx * fpt[2])
-    torque[j, 2] += sign * (rx * fpt[1] - ry * fpt[0])
-
-
-@njit(cache=True, inline="always")
-def _apply_point_force(i, j, P, fpt, pos, quat, dof12, strain, force, torque, qs, static, R, X):
-    """The point force fpt (on B = j, minus on A = i) at P: forces, torques about the centroids, strain forces."""
-    for a in range(3):
-        force[i, a] -= fpt[a]
-    if not static[j]:
-        for a in range(3):
-            force[j, a] += fpt[a]
-        _moment(j, P, pos, fpt, torque, 1.0)
-    _moment(i, P, pos, fpt, torque, -1.0)
-    if dof12[i]:
-        quat_matrix(quat[i], R)
-        body_point(i, P, pos, R, strain, X)
-        add_strain_force(i, X, R, fpt, -1.0, qs)
-    if dof12[j] and not static[j]:
-        quat_matrix(quat[j], R)
-        body_point(j, P, pos, R, strain, X)
-        add_strain_force(j, X, R, fpt, 1.0, qs)
-
-
-@njit(cache=True, inline="always")
-def _store_point(pid_new, us_new, state_new, bond_new, pos_new, fn_new, depth_new, s, kept, pid, us, st, bonded, P,
-                 fn_el, depth):
-    """Record point `kept` of pair slot s in this step's buffer (its rows pid_new ... depth_new)."""
-    pid_new[s, kept] = pid
+def _store_point(pid_new, us_new, state_new, bond_new, pos_new, fn_new, depth_new, s, kept, us, st, bonded, fn_el,
+                 p_pos, p_depth, p_id, q):
+    """Record point q of the pair's points (p_pos, p_depth, p_id) as point `kept` of pair slot s in this step's
+    buffer (rows pid_new ... depth_new). Straight-line code: the counts of the arrays it takes cancel within one
+    basic block, where numba removes them."""
+    pid_new[s, kept] = p_id[q]
     us_new[s, kept, 0] = us[0]
     us_new[s, kept, 1] = us[1]
     us_new[s, kept, 2] = us[2]
     state_new[s, kept] = st
     bond_new[s, kept] = bonded
-    pos_new[s, kept, 0] = P[0]
-    pos_new[s, kept, 1] = P[1]
-    pos_new[s, kept, 2] = P[2]
+    pos_new[s, kept, 0] = p_pos[q, 0]
+    pos_new[s, kept, 1] = p_pos[q, 1]
+    pos_new[s, kept, 2] = p_pos[q, 2]
     fn_new[s, kept] = fn_el
-    depth_new[s, kept] = depth
+    depth_new[s, kept] = p_depth[q]
 
 
-@njit(cache=True, inline="always")
-def pair_forces(i, j, s, slot, k, apt, meff, lf, lo, first_step, dt, law, blocks, deform, forces, con, work, tally,
-                count):
-    """Contact law at the k points of pair (i, j) (slot s of this step, `slot` of last step's, area apt per
-    point; lf >= 0: face lf of block lo decides each point's law row, dda/_kinds.py); returns the number of points
-    kept (bearing or bonded). The arrays the loop over the points uses are
-    taken out of their bundles once, before it (a bundle handed to a helper inside the loop would cost a
-    reference-count increment and decrement of each of its arrays per point)."""
-    old = con.cur[0]
-    new = 1 - old
-    mi = blocks.material[i]
-    mj = blocks.material[j]
-    kn = law.tab[mi, mj, LAW_KN]
-    ks = law.tab[mi, mj, LAW_KS]
-    tanphi = law.tab[mi, mj, LAW_TANPHI]
-    coh = law.tab[mi, mj, LAW_COH]
-    ten = law.tab[mi, mj, LAW_TEN]
-    zeta = law.tab[mi, mj, LAW_ZETA]
-    static, matched, R, w, X = work.static, work.matched, work.R, work.w_old, work.w_old
-    p_pos, p_depth, p_id = work.p_pos, work.p_depth, work.p_id
-    us, fpt, vrel, nrm = work.us, work.fpt, work.vrel, work.nrm
-    pos, vel, quat, kin, fixed, dof12 = blocks.pos, blocks.vel, blocks.quat, blocks.kin, blocks.fixed, blocks.dof12
-    wpres, inertia, angmom = blocks.wpres, blocks.inertia, blocks.angmom
-    strain, srate, wb = deform.strain, deform.srate, deform.wb
-    force, torque, qs = forces.force, forces.torque, forces.qs
-    npt_old, pid_old, us_old, bond_old = con.npt[old], con.pid[old], con.us[old], con.bond[old]
-    pid_new, us_new, state_new, bond_new = con.pid[new], con.us[new], con.state[new], con.bond[new]
-    pos_new, fn_new, depth_new = con.pos[new], con.fn[new], con.depth[new]
-    tab, face_row, face_shape, face_geo, intact_row = law.tab, law.face_row, law.face_shape, law.face_geo, \
-        law.intact_row
-    pos_old = con.pos[old]
-    tol = 1e-3 * min(blocks.size_b[i], blocks.size_b[j])
-    a_int, a_jnt = -1.0, -1.0
-    if lf >= 0 and face_shape[lf] == 1:  # a disc's face: the intact and joint points share their own areas
-        rows = np.empty(k, np.int64)
-        for q in range(k):
-            rows[q] = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
-        a_int, a_jnt = intact_share(lf, lo, p_pos, k, rows, nrm, pos, quat, face_geo, intact_row, R)
-    kept = 0
-    for q in range(k):
-        if lf >= 0:  # the law of the face's kind at this point (joint inside its disc, intact rock outside)
-            r = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
-            if a_int >= 0.0:
-                apt = a_int if r == intact_row else a_jnt
-            kn, ks, tanphi = tab[r, r, LAW_KN], tab[r, r, LAW_KS], tab[r, r, LAW_TANPHI]
-            coh, ten, zeta = tab[r, r, LAW_COH], tab[r, r, LAW_TEN], tab[r, r, LAW_ZETA]
-        found, bonded = _shear_history(npt_old, pid_old, us_old, bond_old, slot, p_id[q], nrm, matched, us)
-        if not found and lf >= 0:  # a cut block model: the same place is the same point (dda/_kinds.py)
-            found, bonded = near_history(npt_old, pos_old, us_old, bond_old, slot, p_pos[q], tol, nrm, matched, us)
-        if not found:
-            bonded = first_step and (coh > 0.0 or ten > 0.0)
-        if p_depth[q] <= 0.0 and not bonded:
-            continue
-        _relative_velocity(i, j, p_pos[q], pos, vel, quat, kin, fixed, dof12, wpres, inertia, angmom, strain,
-                           srate, wb, static, R, w, vrel)
-        st, bonded, fn_el, ee, df, dd = point_force(kn, ks, tanphi, coh * apt, ten * apt, zeta, meff,
-                                                    p_depth[q], nrm, vrel, dt, us, bonded, fpt)
-        tally[T_ELASTIC] += ee
-        tally[T_FRICTION] += df
-        tally[T_DAMPING] += dd
-        if st == 0:
-            continue
-        if st == 2:
-            count[C_SLIDING] += 1
-        if p_depth[q] > tally[T_MAXDEPTH]:
-            tally[T_MAXDEPTH] = p_depth[q]
-        _apply_point_force(i, j, p_pos[q], fpt, pos, quat, dof12, strain, force, torque, qs, static, R, X)
-        _store_point(pid_new, us_new, state_new, bond_new, pos_new, fn_new, depth_new, s, kept, p_id[q], us, st,
-                     bonded, p_pos[q], fn_el, p_depth[q])
-        kept += 1
-    return kept
-
-
+# written out as one loop over the pairs with the loop over their points inside it (over 150 lines): numba counts
+# every array a helper takes in and out at each call unless the counts cancel in straight-line code, so the
+# per-pair and per-point steps use this kernel's own arrays (taken out of the bundles once per step) and call only
+# kernels that take plain arrays (dda/_fcp.py) or scalar and straight-line helpers; a helper taking arrays with
+# branches, or a bundle, cost about 100 count changes per touching pair (the module docstring)
 @njit(cache=True)
 def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform, forces, geom, sleep, con, work,
                  tally, count):
-    """Common plane, contact points and contact law of the npair candidate pairs (pa[p], pb[p]).
-
-    The arrays the loop reads are taken out of their bundles once, before it: an array taken from a bundle
-    inside the loop costs a reference-count increment and decrement per use that numba cannot always remove."""
+    """Common plane, contact points and contact law of the npair candidate pairs (pa[p], pb[p])."""
     nbody = blocks.pos.shape[0]
     old = con.cur[0]
     new = 1 - old
@@ -325,16 +138,25 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
     vert, fnw, vs, fs, es = geom.vert, geom.fnw, geom.vs, geom.fs, geom.es
     he_origin, he_next, he_pair, he_face = geom.he_origin, geom.he_next, geom.he_pair, geom.he_face
     vert_he, edge_he, n_sat = geom.vert_he, geom.edge_he, work.n_sat
-    face_row = law.face_row
-    kinds = len(face_row) > 0
     p_pos, p_depth, p_id, scr, iscr, mass = work.p_pos, work.p_depth, work.p_id, work.scr, work.iscr, blocks.mass
     htab, key_old, nrm_old, npt_old, us_old = con.htab, con.key[old], con.nrm[old], con.npt[old], con.us[old]
     key_new, a_new, b_new, nrm_new, npt_new = con.key[new], con.a[new], con.b[new], con.nrm[new], con.npt[new]
+    pid_old, bond_old = con.pid[old], con.bond[old]
+    pid_new, us_new, state_new, bond_new = con.pid[new], con.us[new], con.state[new], con.bond[new]
+    pos_new, fn_new, depth_new = con.pos[new], con.fn[new], con.depth[new]
+    R, w, X, us, fpt, vrel = work.R, work.w_old, work.w_old, work.us, work.fpt, work.vrel
+    vel, quat, fixed, dof12 = blocks.vel, blocks.quat, blocks.fixed, blocks.dof12
+    wpres, inertia, angmom = blocks.wpres, blocks.inertia, blocks.angmom
+    strain, srate, wb = deform.strain, deform.srate, deform.wb
+    force, torque, qs = forces.force, forces.torque, forces.qs
+    face_row, face_shape, face_geo, intact_row = law.face_row, law.face_shape, law.face_geo, law.intact_row
+    kinds = len(face_row) > 0
+    pos_old = con.pos[old]
     for p in range(npair):
         i = pa[p]
         j = pb[p]
         key = i * nbody + j
-        # last step's slot of the pair
+        # 1. last step's slot of the pair
         slot = -1
         h = _hash_key(key, hmask)
         while htab[h] >= 0:
@@ -349,7 +171,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
         kg = 0.0
         if kinds or lawtab[mi, mj, LAW_TEN] > 0.0 or lawtab[mi, mj, LAW_COH] > 0.0:
             kg = keep_gap
-        # last step's plane, or the centroids' line; a positive gap along it proves the blocks apart
+        # 2. last step's plane, or the centroids' line; a positive gap along it proves the blocks apart
         if slot >= 0:
             for a in range(3):
                 nrm[a] = nrm_old[slot, a]
@@ -364,11 +186,22 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
         nrm[2] /= nl
         g, ia, ib, sa, sb = gap_along(vert, vs[i], vs[i + 1], vs[j], vs[j + 1], nrm[0], nrm[1], nrm[2])
         if g <= kg:
-            g, ia, ib, sa, sb, its, nsat = search_plane(i, j, slot < 0 or npt_old[slot] == 0, vert, fnw, vs, fs, es,
-                                                        he_origin, he_next, he_pair, he_face, vert_he, edge_he, size,
-                                                        nrm, n_sat)
+            # else the Fast Common-Plane search from it, confirmed by the separating-axis search for a new
+            # overlap (no points last step) or a deep one (more than 1 % of the smaller block): FCP's local
+            # search can stop on a poor plane
+            g, ia, ib, sa, sb, its = fcp(vert, fnw, vs[i], vs[i + 1], vs[j], vs[j + 1], he_origin, he_next, he_pair,
+                                         he_face, vert_he, nrm, 1e-13 * size, 50, nrm)
             count[C_FIT] += its
-            count[C_SAT] += nsat
+            if g < 0.0 and (slot < 0 or npt_old[slot] == 0 or g < -0.01 * size):
+                for a in range(3):
+                    n_sat[a] = nrm[a]
+                g2 = sat_search(vert, fnw, vs[i], vs[i + 1], fs[i], fs[i + 1], es[i], es[i + 1], vs[j], vs[j + 1],
+                                fs[j], fs[j + 1], es[j], es[j + 1], he_origin, he_next, edge_he, nrm, g, n_sat)
+                if g2 > g:
+                    count[C_SAT] += 1
+                    for a in range(3):
+                        nrm[a] = n_sat[a]
+                    g, ia, ib, sa, sb = gap_along(vert, vs[i], vs[i + 1], vs[j], vs[j + 1], nrm[0], nrm[1], nrm[2])
         s = count[C_NEW]
         count[C_NEW] += 1
         key_new[s] = key
@@ -385,20 +218,145 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
             wake_list[count[C_WAKE]] = j
             count[C_WAKE] += 1
         kept = 0
+        k = 0
         if g <= kg:
-            # contact points on the plane, then the law at each (geom: this kernel's own argument, handed on as
-            # it came)
-            k = contact_points(geom, i, j, nrm, sa, sb, kg, size, p_pos, p_depth, p_id, scr, iscr)
-            k = with_midpoint(k, sa, sb, ia, ib, vert, p_pos, p_depth, p_id)
-            if k > 0:
-                apt = polygon_area(p_pos, k, nrm) / k
-                meff = _effective_mass(i, j, kin, mass, static)
-                count[C_CONTACTS] += 1
-                lf, lo = -1, -1
-                if kinds:
-                    lf, lo = law_face(i, j, nrm, fnw, fs, face_row)
-                kept = pair_forces(i, j, s, slot, k, apt, meff, lf, lo, first_step, dt, law, blocks, deform, forces,
-                                   con, work, tally, count)
+            # 3. contact points on the plane (geom: this kernel's own argument, handed on as it came)
+            k = max(contact_points(geom, i, j, nrm, sa, sb, kg, size, p_pos, p_depth, p_id, scr, iscr), 0)
+            # plus the support points' midpoint when the plane's overlap sa - sb is not represented: when no point
+            # found reaches half of it (tip against tip, or a penetration through an edge that pierces a face,
+            # which the candidates do not include)
+            maxd = 0.0
+            for q in range(k):
+                if p_depth[q] > maxd:
+                    maxd = p_depth[q]
+            if sa - sb > 0.0 and maxd < 0.5 * (sa - sb) and k < MAXP:
+                p_depth[k] = sa - sb
+                p_id[k] = 0
+                for a in range(3):
+                    p_pos[k, a] = 0.5 * (vert[ia, a] + vert[ib, a])
+                k += 1
+        if k > 0:
+            # 4. the contact law at each point
+            apt = polygon_area(p_pos, k, nrm) / k
+            meff = _effective_mass(kin[i], kin[j], static[j], mass[i], mass[j])
+            count[C_CONTACTS] += 1
+            kn, kt, tanphi = lawtab[mi, mj, LAW_KN], ks, lawtab[mi, mj, LAW_TANPHI]
+            coh, ten, zeta = lawtab[mi, mj, LAW_COH], lawtab[mi, mj, LAW_TEN], lawtab[mi, mj, LAW_ZETA]
+            lf, lo = -1, -1
+            a_int, a_jnt = -1.0, -1.0
+            if kinds:
+                # face lf of block lo decides each point's law row (dda/_kinds.py); a disc's face: the intact and
+                # joint points share their own areas
+                lf, lo = law_face(i, j, nrm, fnw, fs, face_row)
+                if lf >= 0 and face_shape[lf] == 1:
+                    rows = np.empty(k, np.int64)
+                    for q in range(k):
+                        rows[q] = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
+                    a_int, a_jnt = intact_share(lf, lo, p_pos, k, rows, nrm, pos, quat, face_geo, intact_row, R)
+            for q in range(k):
+                if lf >= 0:  # the law of the face's kind at this point (joint inside its disc, intact rock outside)
+                    r = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
+                    if a_int >= 0.0:
+                        apt = a_int if r == intact_row else a_jnt
+                    kn, kt, tanphi = lawtab[r, r, LAW_KN], lawtab[r, r, LAW_KS], lawtab[r, r, LAW_TANPHI]
+                    coh, ten, zeta = lawtab[r, r, LAW_COH], lawtab[r, r, LAW_TEN], lawtab[r, r, LAW_ZETA]
+                # shear history of the same feature in last step's contact, turned onto the current plane
+                found = -1
+                if slot >= 0:
+                    for r in range(npt_old[slot]):
+                        if pid_old[slot, r] == p_id[q]:
+                            found = r
+                            break
+                if found >= 0:
+                    matched[found] = True
+                    us[0], us[1], us[2] = _onto_plane(us_old[slot, found, 0], us_old[slot, found, 1],
+                                                      us_old[slot, found, 2], nrm[0], nrm[1], nrm[2])
+                    bonded = bond_old[slot, found]
+                else:
+                    us[0] = 0.0
+                    us[1] = 0.0
+                    us[2] = 0.0
+                    bonded = False
+                    if lf >= 0:  # a cut block model: the same place is the same point (dda/_kinds.py)
+                        hit, bonded = near_history(npt_old, pos_old, us_old, bond_old, slot, p_pos[q],
+                                                   1e-3 * size, nrm, matched, us)
+                        if hit:
+                            found = 0
+                    if found < 0:
+                        bonded = first_step and (coh > 0.0 or ten > 0.0)
+                if p_depth[q] <= 0.0 and not bonded:
+                    continue
+                # velocity of B (= j) relative to A (= i) at the point (half-step velocities)
+                for a in range(3):
+                    vrel[a] = vel[j, a] - vel[i, a]
+                if not static[j] and dof12[j]:
+                    quat_matrix(quat[j], R)
+                    point_velocity(j, p_pos[q], pos, R, strain, srate, wb, w)
+                    for a in range(3):
+                        vrel[a] += w[a]
+                elif not static[j]:
+                    if kin[j]:
+                        w0, w1, w2 = wpres[j, 0], wpres[j, 1], wpres[j, 2]
+                    else:
+                        w0, w1, w2 = spin(j, quat, inertia, angmom)
+                    c0, c1, c2 = _cross(w0, w1, w2, p_pos[q, 0] - pos[j, 0], p_pos[q, 1] - pos[j, 1],
+                                        p_pos[q, 2] - pos[j, 2])
+                    vrel[0] += c0
+                    vrel[1] += c1
+                    vrel[2] += c2
+                if dof12[i]:
+                    quat_matrix(quat[i], R)
+                    point_velocity(i, p_pos[q], pos, R, strain, srate, wb, w)
+                    for a in range(3):
+                        vrel[a] -= w[a]
+                elif not fixed[i]:
+                    if kin[i]:
+                        w0, w1, w2 = wpres[i, 0], wpres[i, 1], wpres[i, 2]
+                    else:  # i is awake (pairs come from the moving blocks)
+                        w0, w1, w2 = spin(i, quat, inertia, angmom)
+                    c0, c1, c2 = _cross(w0, w1, w2, p_pos[q, 0] - pos[i, 0], p_pos[q, 1] - pos[i, 1],
+                                        p_pos[q, 2] - pos[i, 2])
+                    vrel[0] -= c0
+                    vrel[1] -= c1
+                    vrel[2] -= c2
+                st, bonded, fn_el, ee, df, dd = point_force(kn, kt, tanphi, coh * apt, ten * apt, zeta, meff,
+                                                            p_depth[q], nrm, vrel, dt, us, bonded, fpt)
+                tally[T_ELASTIC] += ee
+                tally[T_FRICTION] += df
+                tally[T_DAMPING] += dd
+                if st == 0:
+                    continue
+                if st == 2:
+                    count[C_SLIDING] += 1
+                if p_depth[q] > tally[T_MAXDEPTH]:
+                    tally[T_MAXDEPTH] = p_depth[q]
+                # the point force fpt on B, minus on A: forces, torques about the centroids, strain forces
+                for a in range(3):
+                    force[i, a] -= fpt[a]
+                if not static[j]:
+                    for a in range(3):
+                        force[j, a] += fpt[a]
+                    c0, c1, c2 = _cross(p_pos[q, 0] - pos[j, 0], p_pos[q, 1] - pos[j, 1], p_pos[q, 2] - pos[j, 2],
+                                        fpt[0], fpt[1], fpt[2])
+                    torque[j, 0] += c0
+                    torque[j, 1] += c1
+                    torque[j, 2] += c2
+                c0, c1, c2 = _cross(p_pos[q, 0] - pos[i, 0], p_pos[q, 1] - pos[i, 1], p_pos[q, 2] - pos[i, 2],
+                                    fpt[0], fpt[1], fpt[2])
+                torque[i, 0] -= c0
+                torque[i, 1] -= c1
+                torque[i, 2] -= c2
+                if dof12[i]:
+                    quat_matrix(quat[i], R)
+                    body_point(i, p_pos[q], pos, R, strain, X)
+                    add_strain_force(i, X, R, fpt, -1.0, qs)
+                if dof12[j] and not static[j]:
+                    quat_matrix(quat[j], R)
+                    body_point(j, p_pos[q], pos, R, strain, X)
+                    add_strain_force(j, X, R, fpt, 1.0, qs)
+                _store_point(pid_new, us_new, state_new, bond_new, pos_new, fn_new, depth_new, s, kept, us, st,
+                             bonded, fn_el, p_pos, p_depth, p_id, q)
+                kept += 1
         npt_new[s] = kept
         count[C_POINTS] += kept
         # shear-spring energy of last step's points of this pair that have no successor (they opened)
