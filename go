@@ -3,7 +3,7 @@
 #   ./go run   [SCENE] [OUTDIR]   build the sphere model of SCENE (default: cases/scenes/open_pit.toml); a run
 #                                 again replaces its earlier model there (sgim build --force: files added
 #                                 by hand stay, a folder of other files is refused)
-#   ./go test  [PYTEST ARGS]      run the test suite
+#   ./go test  [PYTEST ARGS]      run the test suite (without arguments: on both cores, see tests/conftest.py)
 # The Python packages are the exact versions in requirements.lock; the project goes in on top of them.
 #   ./go lock                     re-resolve pyproject.toml's ranges in a throwaway venv, rewrite requirements.lock
 set -euo pipefail
@@ -119,7 +119,14 @@ case "$cmd" in
     ;;
   test)
     setup
-    exec .venv/bin/python -m pytest -q "$@"
+    if (($#)); then
+      exec .venv/bin/python -m pytest -q "$@"
+    fi
+    # the whole suite: one worker per core, then the tests that need both cores to themselves (tests/conftest.py)
+    rc=0
+    .venv/bin/python -m pytest -q -n 2 -m "not serial" || rc=$?
+    .venv/bin/python -m pytest -q -m serial || rc=$?
+    exit "$rc"
     ;;
   lock)
     lock
