@@ -195,14 +195,8 @@ def main(argv=None):
     if args.picture:
         sizes = (46, 100) if args.quick else (46, 100, 215)
         rows = picture_rows(sizes, args.repeats, every_up_to=1_100_000)
-        print(f"sgim.render.render of an opaque block of n^3 spheres in a 10 m cube, 1600 x 1100, medians of "
-              f"{args.repeats}; load average {os.getloadavg()[0]:.1f}")
-        print(machine_line())
-        print()
-        print(picture_table(rows))
-        if args.json:
-            Path(args.json).write_text(json.dumps({"machine": machine_info(), "load_average": os.getloadavg(),
-                                                   "picture": rows}, indent=2))
+        report(f"sgim.render.render of an opaque block of n^3 spheres in a 10 m cube, 1600 x 1100, medians of "
+               f"{args.repeats}", picture_table(rows), args.json, {"picture": rows})
         return
     repo = Path(args.repo).resolve()
     if not (repo / "sgim" / "cli.py").is_file():
@@ -211,14 +205,20 @@ def main(argv=None):
     cubes = CUBES[:1] if args.quick else CUBES[1:] if args.large else CUBES
     with tempfile.TemporaryDirectory(prefix="bench_picture_") as d:
         rows = [run_case(repo, Path(d), name, side, args.repeats) for name, side in cubes]
-    print(f"Default `sgim build` of equal random spheres (r = 0.05 m) at {rev.strip() or repo}, medians of "
-          f"{args.repeats} warm runs; load average {os.getloadavg()[0]:.1f}")
+    report(f"Default `sgim build` of equal random spheres (r = 0.05 m) at {rev.strip() or repo}, medians of "
+           f"{args.repeats} warm runs", table(rows), args.json, {"revision": rev.strip(), "rows": rows})
+
+
+def report(title, text, json_path, data):
+    """The title with the load average, the machine line and the table on stdout; the data, machine and load
+    average to `json_path` when given."""
+    print(f"{title}; load average {os.getloadavg()[0]:.1f}")
     print(machine_line())
     print()
-    print(table(rows))
-    if args.json:
-        Path(args.json).write_text(json.dumps({"machine": machine_info(), "revision": rev.strip(),
-                                               "load_average": os.getloadavg(), "rows": rows}, indent=2))
+    print(text)
+    if json_path:
+        Path(json_path).write_text(json.dumps({"machine": machine_info(), "load_average": os.getloadavg(), **data},
+                                              indent=2))
 
 
 if __name__ == "__main__":
