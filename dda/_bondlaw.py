@@ -119,19 +119,9 @@ def bond_forces(mo, sp, bonds, pl, dt, t, last, res):
 @njit(cache=True)
 def full_bonds(mo, sp, bonds, pl, dt, t, res):
     """The bonds with a shear spring (``bonds.full``); returns (elastic energy, intact, broken)."""
-    X = mo.x
-    V = mo.v
-    W = mo.w
-    force = mo.force
-    torque = mo.torque
-    BB = bonds.rows
-    full = bonds.full
-    intact = bonds.intact
-    bi = bonds.i
-    bj = bonds.j
-    m = sp.m
-    fixed = sp.fixed
-    kin = sp.kin
+    X, V, W, force, torque = mo.x, mo.v, mo.w, mo.force, mo.torque
+    BB, full, intact, bi, bj = bonds.rows, bonds.full, bonds.intact, bonds.i, bonds.j
+    m, fixed, kin = sp.m, sp.fixed, sp.kin
     e_bond = 0.0
     nint = 0
     nbroken = 0

@@ -547,19 +547,9 @@ def integrate(mo, sp, env, dt, dt_prev, acc, x_ref):
 
     One loop over plain arrays taken from the bundles once: a bundle's field read inside the loop (or a helper
     taking the bundles per sphere) costs reference counts per sphere, which made this kernel 6 x slower."""
-    X = mo.x
-    V = mo.v
-    W = mo.w
-    force = mo.force
-    torque = mo.torque
-    m = sp.m
-    inertia = sp.inertia
-    bforce = sp.bforce
-    fixed = sp.fixed
-    kin = sp.kin
-    gravity = env.gravity
-    visc = env.visc
-    local_damp = env.local_damp
+    X, V, W, force, torque = mo.x, mo.v, mo.w, mo.force, mo.torque
+    m, inertia, bforce, fixed, kin = sp.m, sp.inertia, sp.bforce, sp.fixed, sp.kin
+    gravity, visc, local_damp = env.gravity, env.visc, env.local_damp
     dtavg = 0.5 * (dt + dt_prev)
     track = x_ref.shape[0] > 0
     ke = 0.0
