@@ -111,6 +111,7 @@ def run_case(repo, tmp, name, side, repeats):
 def grid_model(n, side=10.0, seed=1):
     """n^3 spheres on a cubic grid filling a cube of `side` m, moved by up to a tenth of the spacing, radius 0.55
     spacings (neighbours overlap: an opaque block), as a SphereModel without bonds."""
+    # not at the top: the build tables run sgim in child processes; only --picture loads it into this one
     import numpy as np
 
     from sgim.model import SphereModel
@@ -132,6 +133,7 @@ def grid_model(n, side=10.0, seed=1):
 def picture_rows(sizes, repeats, every_up_to):
     """The picture alone of grid_model(n) for each n: (n^3, drawn, hidden, median s, median s drawing every
     sphere or None)."""
+    # not at the top: only --picture draws in this process (see grid_model)
     import sgim.render as render_mod
 
     rows = []
