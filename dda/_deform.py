@@ -30,7 +30,7 @@ from numba import njit
 
 from sgim.portable import cholesky, eigvalsh, inv, matmul
 
-from ._kinematics import quat_matrix
+from ._kinematics import place_vertices, quat_matrix
 from .polyhedra import mass_properties
 
 
@@ -144,17 +144,7 @@ def deform_geometry(i, pos, R, strain, vs, fs, vloc, nloc, dloc, vert, fnw, fdw,
     for a in range(3):
         for b in range(3):
             G[a, b] = R[a, 0] * F[0, b] + R[a, 1] * F[1, b] + R[a, 2] * F[2, b]
-    for a in range(3):
-        aabb[i, a] = 1e300
-        aabb[i, 3 + a] = -1e300
-    for v in range(vs[i], vs[i + 1]):
-        for a in range(3):
-            x = pos[i, a] + G[a, 0] * vloc[v, 0] + G[a, 1] * vloc[v, 1] + G[a, 2] * vloc[v, 2]
-            vert[v, a] = x
-            if x < aabb[i, a]:
-                aabb[i, a] = x
-            if x > aabb[i, 3 + a]:
-                aabb[i, 3 + a] = x
+    place_vertices(i, pos, G, vs, vloc, vert, aabb)
     for f in range(fs[i], fs[i + 1]):
         # F^-T n = F^-1 n (F symmetric); n' . F X = n . X on the face, so d' = dloc / |F^-1 n|
         nb0 = i00 * nloc[f, 0] + i01 * nloc[f, 1] + i02 * nloc[f, 2]

@@ -30,7 +30,7 @@ from numba import njit
 from ._broad import build_grid, buckets_for, find_pairs, inside_cells, map_cells, n_cells
 from ._deform import deform_geometry, deform_step
 from ._fcp import MAXP
-from ._kinematics import ang_vel, quat_matrix, turn, turned
+from ._kinematics import ang_vel, place_vertices, quat_matrix, turn, turned
 from ._narrow import carry_resting, hash_pairs, narrow_phase
 from ._state import (ACC_DRIVER, ACC_SLEEPING, C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE,
                      E_DAMPING, E_ELASTIC, E_FRICTION, E_KIN, E_LOCAL, E_POT, NCOUNT, NTALLY, ST_AWAKE,
@@ -45,17 +45,7 @@ OK, NEED_CAPACITY, BLOWUP = 0, 1, 2
 def update_geometry(i, pos, quat, vs, fs, vloc, nloc, dloc, vert, fnw, fdw, aabb):
     R = np.empty((3, 3))
     quat_matrix(quat[i], R)
-    for a in range(3):
-        aabb[i, a] = 1e300
-        aabb[i, 3 + a] = -1e300
-    for v in range(vs[i], vs[i + 1]):
-        for a in range(3):
-            x = pos[i, a] + R[a, 0] * vloc[v, 0] + R[a, 1] * vloc[v, 1] + R[a, 2] * vloc[v, 2]
-            vert[v, a] = x
-            if x < aabb[i, a]:
-                aabb[i, a] = x
-            if x > aabb[i, 3 + a]:
-                aabb[i, 3 + a] = x
+    place_vertices(i, pos, R, vs, vloc, vert, aabb)
     for f in range(fs[i], fs[i + 1]):
         d = dloc[f]
         for a in range(3):

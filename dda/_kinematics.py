@@ -89,3 +89,20 @@ def omega(j, kin, static, wpres, quat, inertia, angmom, R, out):
     else:
         quat_matrix(quat[j], R)
         ang_vel(R, inertia[j], angmom[j], out)
+
+
+@njit(cache=True, inline="always")
+def place_vertices(i, pos, M, vs, vloc, vert, aabb):
+    """World vertices x = pos[i] + M X of block i (M = R for a rigid block, R (I + E) for a deformable one) and
+    its box."""
+    for a in range(3):
+        aabb[i, a] = 1e300
+        aabb[i, 3 + a] = -1e300
+    for v in range(vs[i], vs[i + 1]):
+        for a in range(3):
+            x = pos[i, a] + M[a, 0] * vloc[v, 0] + M[a, 1] * vloc[v, 1] + M[a, 2] * vloc[v, 2]
+            vert[v, a] = x
+            if x < aabb[i, a]:
+                aabb[i, a] = x
+            if x > aabb[i, 3 + a]:
+                aabb[i, 3 + a] = x
