@@ -72,7 +72,11 @@ SETTLE_TOLERANCE = 1e-3  # the damped beam against its static sag: 0.1 %
 ROCKING_TOLERANCE = 1e-3  # in-house against YADE: 0.1 %
 HANG = ("intact", "fault", "joint", "small_joint")
 G = 9.81
-TOLERANCE = 0.05  # the agreement the table checks: 5 % of the reference
+# the agreement the table checks (issue 16): static results 1 %, onset angles 0.5 %; a distance slid in a given
+# time (incline, block_wedge) is neither: 2 % (YADE Polyhedra keeps its shear history per law: +1.05 %)
+STATIC_TOLERANCE = 0.01
+ONSET_TOLERANCE = 0.005
+SLIDE_TOLERANCE = 0.02
 WEDGE_REST = 1e-4  # a wedge trial that moves less than this many radii in its last quarter has come to rest
 WEDGE_LIGGGHTS_TAU = 0.1  # [s] the LIGGGHTS wedge's fix viscous: gamma = sphere mass / tau (liggghts_wedge)
 WEDGE_WALL_T = 2.4  # [s] a trial of the wedge on joint walls (walled_wedge): it settles onto them for about 1.5 s
@@ -216,7 +220,7 @@ def case_column(engines, work, say, timeout):
         got = float(-res.displacement()[bottom, 2].mean())
         err = got / ref - 1.0
         rows.append(Row("column", eng, f"{got * 1e6:.3f} um", f"{ref * 1e6:.3f} um (static network)",
-                        f"{100 * err:+.2f} %", abs(err) <= TOLERANCE, time.perf_counter() - t0,
+                        f"{100 * err:+.2f} %", abs(err) <= STATIC_TOLERANCE, time.perf_counter() - t0,
                         value=got, ref_value=ref, err_value=err))
         if say:
             say(_line(rows[-1]))
@@ -465,7 +469,7 @@ def case_wedge(engines, work, say, timeout, iterations=7):
             if extra:
                 note += "; " + extra
             rows.append(Row(case, eng, f"{got:.3f} deg", f"{phi_c:.3f} deg (Hoek & Bray)", f"{100 * err:+.2f} %",
-                            abs(err) <= TOLERANCE, time.perf_counter() - t0, note=note,
+                            abs(err) <= ONSET_TOLERANCE, time.perf_counter() - t0, note=note,
                             value=got, ref_value=phi_c, err_value=err))
         else:
             rows.append(Row(case, eng, f"{b['where']} at {lo:.1f} and {hi:.1f} deg",
@@ -509,7 +513,7 @@ def _dda_block_wedge(phi_c, say):
     got = d["phi_crit_dda"]
     err = got / phi_c - 1.0
     row = Row("wedge", "dda-blocks", f"{got:.2f} deg", f"{phi_c:.2f} deg (Hoek & Bray)", f"{100 * err:+.2f} %",
-              abs(err) <= TOLERANCE, time.perf_counter() - t0, note="DDA block wedge (dda wedge)", value=got,
+              abs(err) <= ONSET_TOLERANCE, time.perf_counter() - t0, note="DDA block wedge (dda wedge)", value=got,
               ref_value=phi_c, err_value=err)
     if say:
         say(_line(row))
@@ -551,7 +555,7 @@ def case_blocks(engines, work, say, timeout):
             err = got / ref - 1.0
             eng_name = "dda" if eng == "dda" else "yade-polyhedra"
             rows.append(Row(name, eng_name, f"{got:.4f} m", f"{ref:.4f} m (analytical)", f"{100 * err:+.2f} %",
-                            abs(err) <= TOLERANCE, time.perf_counter() - t0, note=note, value=got, ref_value=ref,
+                            abs(err) <= SLIDE_TOLERANCE, time.perf_counter() - t0, note=note, value=got, ref_value=ref,
                             err_value=err))
             if say:
                 say(_line(rows[-1]))
