@@ -149,6 +149,10 @@ class _Pool:
             sel &= np.all(self.lo <= hi, axis=1) & np.all(self.hi >= lo, axis=1)
         return np.nonzero(sel)[0]
 
+    def near(self, lo, hi):
+        """Indices of the blocks whose box overlaps the box lo..hi."""
+        return np.nonzero(np.all(self.lo <= hi, axis=1) & np.all(self.hi >= lo, axis=1))[0]
+
     def replace(self, repl):
         """Replace block i by the list repl[i] for every i in the dict ``repl`` (boxes computed for new blocks only)."""
         if not repl:
@@ -163,6 +167,115 @@ class _Pool:
         self.blocks = out + self.blocks[start:]
         self.lo = np.concatenate(lo + [self.lo[start:]])
         self.hi = np.concatenate(hi + [self.hi[start:]])
+
+
+class _Grid:
+    """The pool's blocks in a uniform grid of cells (each block listed in every cell its box overlaps), so that a
+    cutter finds the blocks it may reach from the cells its box and plane cross: a DFN's small discs cost what
+    they reach, not a scan of every block (the open pit's 6116 discs over up to 54 000 blocks).
+
+    The same interface as _Pool for the cuts (``blocks[i]``, ``crossing``, ``near``, ``replace``), with ids that
+    stay valid while other blocks are cut; ``key[i]`` is the block's place in the pool's order (a tuple: the pieces
+    of a cut block take its place, as _Pool.replace puts them), so ``to_pool`` gives the order _Pool would have.
+    """
+
+    def __init__(self, pool, lo, hi):
+        n = len(pool.blocks)
+        self.blocks = dict(enumerate(pool.blocks))
+        self.key = {i: (i,) for i in range(n)}
+        self.lo, self.hi = pool.lo.copy(), pool.hi.copy()
+        self.next = n
+        ext = np.max(pool.hi - pool.lo, axis=1) if n else np.ones(1)
+        self.g0 = np.asarray(lo, float)
+        span = np.asarray(hi, float) - self.g0
+        # cells of half the median block's size, at most 128 along the domain's longest side
+        self.cell = max(0.5 * float(np.median(ext)), float(span.max()) / 128.0)
+        self.dims = np.maximum(np.ceil(span / self.cell).astype(np.int64), 1)
+        self._g, self._dims, self._top = self.g0.tolist(), self.dims.tolist(), (self.dims - 1).tolist()
+        self.cells = {}
+        for i in range(n):
+            self._file(i)
+
+    def _range(self, lo, hi):
+        a = np.clip(np.floor((np.asarray(lo) - self.g0) / self.cell).astype(np.int64), 0, self.dims - 1)
+        b = np.clip(np.floor((np.asarray(hi) - self.g0) / self.cell).astype(np.int64), 0, self.dims - 1)
+        return a, b
+
+    def _cell_ids(self, lo, hi):
+        a, b = self._range(lo, hi)
+        ix, iy, iz = np.meshgrid(*(np.arange(a[k], b[k] + 1) for k in range(3)), indexing="ij")
+        return ix.ravel(), iy.ravel(), iz.ravel()
+
+    def _flat(self, ix, iy, iz):
+        return ((ix * self.dims[1] + iy) * self.dims[2] + iz).tolist()
+
+    def _file(self, i, add=True):
+        """List block i in (add) or take it out of every cell its box overlaps (scalar Python: a few cells)."""
+        (gx, gy, gz), h, (_, ny, nz) = self._g, self.cell, self._dims
+        (x0, y0, z0), (x1, y1, z1) = self.lo[i].tolist(), self.hi[i].tolist()
+        mx, my, mz = self._top
+        cells = self.cells
+        for x in range(min(max(int((x0 - gx) // h), 0), mx), min(max(int((x1 - gx) // h), 0), mx) + 1):
+            for y in range(min(max(int((y0 - gy) // h), 0), my), min(max(int((y1 - gy) // h), 0), my) + 1):
+                base = (x * ny + y) * nz
+                za, zb = min(max(int((z0 - gz) // h), 0), mz), min(max(int((z1 - gz) // h), 0), mz)
+                for c in range(base + za, base + zb + 1):
+                    if add:
+                        cells.setdefault(c, set()).add(i)
+                    else:
+                        cells[c].discard(i)
+
+    def _gather(self, cells):
+        out = set()
+        for c in cells:
+            got = self.cells.get(c)
+            if got:
+                out |= got
+        return np.fromiter(out, np.int64, len(out))
+
+    def _ordered(self, ids):
+        return np.array(sorted(ids.tolist(), key=self.key.__getitem__), np.int64)
+
+    def near(self, lo, hi):
+        """Ids (in pool order) of the blocks whose box overlaps the box lo..hi."""
+        ids = self._gather(self._flat(*self._cell_ids(lo, hi)))
+        sel = np.all(self.lo[ids] <= hi, axis=1) & np.all(self.hi[ids] >= lo, axis=1)
+        return self._ordered(ids[sel])
+
+    def crossing(self, n, d, lo=None, hi=None):
+        """Ids (in pool order) of blocks whose box the plane n . x = d crosses and that overlap the box lo..hi."""
+        lo = self.g0 if lo is None else lo
+        hi = self.g0 + self.dims * self.cell if hi is None else hi
+        ix, iy, iz = self._cell_ids(lo, hi)
+        centre = self.g0 + (np.column_stack([ix, iy, iz]) + 0.5) * self.cell
+        on = np.abs(centre @ n - d) <= 0.5 * self.cell * np.abs(n).sum() * (1 + 1e-9) + 1e-9 * self.cell
+        ids = self._gather(self._flat(ix[on], iy[on], iz[on]))
+        blo, bhi = self.lo[ids], self.hi[ids]
+        c, h = (blo + bhi) / 2, (bhi - blo) / 2
+        sel = (np.abs(c @ n - d) < np.abs(h) @ np.abs(n)) & np.all(blo <= hi, axis=1) & np.all(bhi >= lo, axis=1)
+        return self._ordered(ids[sel])
+
+    def replace(self, repl):
+        """Replace block i by the pieces repl[i] (new ids, in i's place of the order) for every i in ``repl``."""
+        for i, pieces in repl.items():
+            self._file(i, add=False)
+            key = self.key.pop(i)
+            del self.blocks[i]
+            for j, b in enumerate(pieces):
+                k = self.next
+                self.next += 1
+                if k >= len(self.lo):
+                    self.lo = np.concatenate([self.lo, np.empty_like(self.lo)])
+                    self.hi = np.concatenate([self.hi, np.empty_like(self.hi)])
+                self.lo[k], self.hi[k] = b.v.min(0), b.v.max(0)
+                self.blocks[k], self.key[k] = b, key + (j,)
+                self._file(k)
+
+    def to_pool(self, pool):
+        """Write the blocks back into ``pool`` in _Pool's order."""
+        order = sorted(self.blocks, key=self.key.__getitem__)
+        pool.blocks = [self.blocks[i] for i in order]
+        pool.lo, pool.hi = self.lo[order].reshape(-1, 3), self.hi[order].reshape(-1, 3)
 
 
 def _cut_plane(pool, n, d, src, min_volume, stats, lo=None, hi=None, accept=None):
@@ -266,8 +379,12 @@ def _disc_box(c, n, r, t):
     return c - ext, c + ext
 
 
-def _discs(pool, scene, spec, sources, stats):
-    for name, c, n, r, t in _disc_list(scene, spec):
+def _discs(pool, scene, spec, sources, stats, dlo, dhi):
+    discs = _disc_list(scene, spec)
+    if not discs:
+        return
+    grid = _Grid(pool, dlo, dhi)  # a disc finds the blocks it may reach by the grid's cells, not a scan of all
+    for name, c, n, r, t in discs:
         c, n = np.asarray(c, float), np.asarray(n, float)
         kind = FAULT if t > 0 else JOINT
         lo, hi = _disc_box(c, n, r, t)
@@ -275,15 +392,16 @@ def _discs(pool, scene, spec, sources, stats):
         for off in ((-t / 2, t / 2) if t > 0 else (0.0,)):
             cc = c + off * n
             sources.append(Source(name, kind, "disc", centre=cc, normal=n, radius=r))
-            repl = _cut_plane(pool, n, float(n @ cc), len(sources) - 1, spec.min_volume, stats, lo, hi,
+            repl = _cut_plane(grid, n, float(n @ cc), len(sources) - 1, spec.min_volume, stats, lo, hi,
                               lambda b, s, cc=cc: disc_reaches(b, cc, n, r, basis, s))
             stats["disc_cuts"] = stats.get("disc_cuts", 0) + len(repl)
         if t > 0:
-            _fault_material(pool, c, n, r, t, name, lo, hi)
+            _fault_material(grid, c, n, r, t, name, lo, hi)
+    grid.to_pool(pool)
 
 
 def _fault_material(pool, c, n, r, t, name, lo, hi):
-    for i in np.nonzero(np.all(pool.lo <= hi, axis=1) & np.all(pool.hi >= lo, axis=1))[0]:
+    for i in pool.near(lo, hi).tolist():
         b = pool.blocks[i]
         s = b.v @ n - n @ c
         if s.min() < -t / 2 - REL * b.diag() or s.max() > t / 2 + REL * b.diag():
@@ -388,7 +506,7 @@ def build_blocks(scene, progress=None) -> BlockModel:
     stages = (("joint sets", lambda: _fabric(pool, spec, sources, lo, hi, stats)),
               ("excavation", lambda: _excavations(pool, scene, sources, stats)),
               ("cavities", lambda: _cavities(pool, scene, sources, stats)),
-              ("discs", lambda: _discs(pool, scene, spec, sources, stats)),
+              ("discs", lambda: _discs(pool, scene, spec, sources, stats, lo, hi)),
               ("surfaces", lambda: _surface_discontinuities(pool, scene, spec, sources, stats)),
               ("slivers", lambda: _merge_slivers(pool, spec.min_volume, stats)))
     for name, run in stages:

@@ -372,3 +372,41 @@ def test_disc_reach_against_a_constrained_minimisation():
             assert got == (dist <= r), (trial, r, dist)
             agree[got] += 1
     assert min(agree.values()) > 50, agree
+
+
+def test_grid_finds_the_blocks_a_scan_of_every_box_finds():
+    """The discs' cell grid (geoblocks._Grid) against a scan of every block's box (the definition _Pool.crossing
+    transcribes): for random planes and disc boxes, the same blocks in the same order, also after blocks were
+    replaced by their pieces."""
+    from dda.blockcut import TBlock, split, unit
+    from dda.geoblocks import BOX_FACES, _Grid, _Pool
+
+    rng = np.random.default_rng(7)
+    lo, hi = np.array([-10.0, -5.0, 0.0]), np.array([20.0, 15.0, 12.0])
+    blocks = []
+    for _ in range(300):
+        a = rng.uniform(lo, hi - 0.5)
+        b = np.minimum(a + rng.uniform(0.2, 4.0, 3), hi)
+        v = np.array([[x, y, z] for z in (a[2], b[2]) for y in (a[1], b[1]) for x in (a[0], b[0])])
+        blocks.append(TBlock(v, [list(f) for f in BOX_FACES], [0] * 6))
+    pool = _Pool(blocks)
+    grid = _Grid(pool, lo, hi)
+    for step in range(60):
+        n = unit(rng.normal(size=3))
+        c = rng.uniform(lo, hi)
+        r = rng.uniform(0.5, 8.0)
+        blo, bhi = c - r, c + r
+        ids = grid.crossing(n, float(n @ c), blo, bhi)
+        ref = pool.crossing(n, float(n @ c), blo, bhi)
+        assert [grid.blocks[i] for i in ids.tolist()] == [pool.blocks[i] for i in ref.tolist()]
+        near = grid.near(blo, bhi)
+        assert [grid.blocks[i] for i in near.tolist()] == [pool.blocks[i] for i in pool.near(blo, bhi).tolist()]
+        if step % 3 == 0 and len(ref):  # cut the first crossing block in both, its pieces in its place
+            i, k = int(ref[0]), int(ids[0])
+            pieces = [p for p in split(pool.blocks[i], n, float(n @ c), 0) if p is not None]
+            pool.replace({i: pieces})
+            grid.replace({k: pieces})
+    back = _Pool([])
+    grid.to_pool(back)
+    assert back.blocks == pool.blocks
+    np.testing.assert_array_equal(back.lo, pool.lo)
