@@ -20,6 +20,9 @@
 - wedge: the paper's wedge (joints 45/005 and 55/135, face 65/065, height 10 m) as FCC spheres (r = 0.5): the
   wedge's spheres bonded, the rock behind the joints fixed, the joints smooth: the friction at which it starts to
   slide against Hoek & Bray and the DDA block wedge.
+- planar: a 1.2 x 0.4 m block of bonded FCC spheres (r = 0.05), 0.3 m thick, on one joint dipping 35 deg (no
+  cohesion, no water), the rock below it fixed, the joint smooth: the friction at which it starts to slide
+  against Hoek & Bray's tan phi_c = tan psi.
 """
 from __future__ import annotations
 
@@ -27,8 +30,8 @@ import numpy as np
 
 from cases import SCENES
 
-# dda is imported inside wedge_cavities() only: the other generators and the modules that read this one's
-# constants (cases/lib/crossval.py) load no DDA engine.
+# dda is imported inside half_spaces() and wedge_cavities() only: the other generators and the modules that read
+# this one's constants (cases/lib/crossval.py) load no DDA engine.
 
 HERE = SCENES / "crossval"
 
@@ -47,6 +50,11 @@ BEAM_JOINT = [dict(name="joint", centre=[0.6, 0.06, 0.06], dip=90.0, dip_directi
                    thickness=0.0)]
 WEDGE = dict(joint_a=(45.0, 5.0), joint_b=(55.0, 135.0), face=(65.0, 65.0), height=10.0, radius=0.5, margin=1.6,
              rock=1.5)
+# planar sliding: a joint dipping 35 deg towards +x through `point`; the block is the rock within `thickness` above
+# it (measured along its normal), the fixed rock a layer `rock` thick below it; the domain's vertical faces at
+# x = lo and x = hi are the dry tension crack and the slope face where the joint daylights
+PLANAR = dict(dip=35.0, dip_direction=90.0, point=(0.5, 0.0, 0.64), thickness=0.3, rock=0.2, radius=0.05,
+              lo=(0.0, 0.0, 0.0), hi=(1.2, 0.4, 1.4))
 
 
 def _fmt(v):
@@ -79,25 +87,51 @@ def dda_scene(name, comment, model, simulation, contact, spheres):
                       _table("spheres", {"model": model, **spheres})])
 
 
+def half_spaces(lo, hi, planes):
+    """[[cavity]] tables of half-spaces: each (name, (normal, offset)) is the part of a box 5 m larger than the
+    domain (lo, hi) where normal . x <= offset, triangulated."""
+    from dda.cut import clip
+    from dda.shapes import box
+
+    big = box(np.asarray(lo) - 5.0, np.asarray(hi) + 5.0)
+    out = []
+    for name, plane in planes:
+        piece = clip(big, plane)
+        tri = [[p[0], p[k], p[k + 1]] for p in piece.faces for k in range(1, len(p) - 1)]
+        out.append(dict(name=name, vertices=np.round(piece.vertices, 9).tolist(), faces=tri))
+    return out
+
+
 def wedge_cavities():
     """Closed surfaces of what the wedge model leaves out: the air in front of the slope face, and the rock
     deeper than ``rock`` below either joint (the fixed rock is a layer under the joints)."""
     from dda import hoekbray
-    from dda.cut import clip
-    from dda.shapes import box
 
     w = WEDGE
     a, b, f, t, dt, verts = hoekbray.wedge_geometry(w["joint_a"], w["joint_b"], w["face"], None, w["height"])
     lo = verts.min(0) - w["margin"]
     hi = verts.max(0) + w["margin"]
     hi[2] = verts[:, 2].max()
-    big = box(lo - 5.0, hi + 5.0)
-    out = []
-    for name, plane in (("air", (-f, 0.0)), ("deep rock A", (a, -w["rock"])), ("deep rock B", (b, -w["rock"]))):
-        piece = clip(big, plane)
-        tri = [[p[0], p[k], p[k + 1]] for p in piece.faces for k in range(1, len(p) - 1)]
-        out.append(dict(name=name, vertices=np.round(piece.vertices, 9).tolist(), faces=tri))
-    return lo, hi, out
+    return lo, hi, half_spaces(lo, hi, (("air", (-f, 0.0)), ("deep rock A", (a, -w["rock"])),
+                                        ("deep rock B", (b, -w["rock"]))))
+
+
+def planar_normal():
+    """The planar case's joint: its upward unit normal and its down-dip unit vector."""
+    d, a = np.radians(PLANAR["dip"]), np.radians(PLANAR["dip_direction"])
+    normal = np.array([np.sin(d) * np.sin(a), np.sin(d) * np.cos(a), np.cos(d)])
+    down = np.array([np.cos(d) * np.sin(a), np.cos(d) * np.cos(a), -np.sin(d)])
+    return normal, down
+
+
+def planar_cavities():
+    """The planar case's domain (lo, hi) and the closed surfaces it leaves out: the air more than ``thickness``
+    above the joint (measured along its normal) and the rock deeper than ``rock`` below it."""
+    p = PLANAR
+    n, _ = planar_normal()
+    lo, hi = np.array(p["lo"], float), np.array(p["hi"], float)
+    d = float(n @ np.asarray(p["point"], float))
+    return lo, hi, half_spaces(lo, hi, (("air", (-n, -(d + p["thickness"]))), ("deep rock", (n, d - p["rock"]))))
 
 
 def write_all(folder=HERE):
@@ -184,6 +218,30 @@ def write_all(folder=HERE):
         {"density": 2600.0, "bond_young": 1e9, "fixed_below": [[*w["joint_a"], 0.0, 0.0, 0.0],
                                                                [*w["joint_b"], 0.0, 0.0, 0.0]],
          "smooth_joints": True, "joint_friction": 18.0})
+    lo, hi, cavities = planar_cavities()
+    p = PLANAR
+    files["planar_model.toml"] = sgim_scene(
+        "planar_model", f"Planar sliding: a block of FCC spheres (r = {p['radius']:g}) on one joint dipping "
+        f"{p['dip']:g} deg towards +x ({p['dip']:g}/{p['dip_direction']:03.0f}) through {list(p['point'])}. The joint "
+        "crosses the lattice, not along a lattice plane: the block's spheres on it sit 0.08 r to 1.8 r above it (a "
+        "stepped face); a smooth joint acts along the joint's normal all the same. The block is the rock within "
+        f"{p['thickness']:g} m "
+        f"above the joint (along its normal), the rock deeper than {p['rock']:g} m below it is a cavity, and so "
+        f"is the air above the block. The domain's vertical faces at x = {lo[0]:g} and x = {hi[0]:g} are a dry tension "
+        "crack and the slope face in which the joint daylights. The block's base along the dip is about five times "
+        "its thickness (b / h > tan psi: it slides, it cannot topple).", lo.tolist(), hi.tolist(), p["radius"],
+        [dict(name="joint", centre=list(p["point"]), dip=p["dip"], dip_direction=p["dip_direction"], radius=10.0,
+              thickness=0.0)], cavities, rule="geometric")
+    files["planar.toml"] = dda_scene(
+        "planar", f"The block's spheres are bonded; the rock below the joint is fixed; the joint is smooth, with no "
+        f"cohesion and no water: Hoek & Bray's FS = tan(phi) / tan(psi), so the block starts to slide where the "
+        f"joint friction equals the dip, {p['dip']:g} deg; `cases crossval` finds the onset (here it slides, at "
+        "30 deg). The block lands on the joint with its springs unloaded and bounces; local damping 0.7 stills it "
+        "(at 0.1 the bouncing let it creep down at 37 deg, above the dip), 0.3 s per trial.", "planar_model.toml",
+        {"duration": 0.3, "record_every": 0.01, "local_damping": 0.7, "frames": 1},
+        {"kn": 1e7, "ks": 5e6, "friction": 30.0},
+        {"density": 2600.0, "bond_young": 1e8, "fixed_below": [[p["dip"], p["dip_direction"], *p["point"]]],
+         "smooth_joints": True, "joint_friction": 30.0})
     files["block_wedge.toml"] = "\n".join([
         "# The paper's wedge as one DDA block on three fixed blocks at friction 10 deg, well below the critical\n"
         "# 19.7 deg: it slides 1/2 g sin(psi5) (1 - tan(phi) / tan(phi_c)) t^2 along the line of intersection.\n"
