@@ -1,6 +1,6 @@
 """Cross-validation: the same models in-house, in YADE and in LIGGGHTS, against analytical references.
 
-    cases crossval [--cases hang,column,rocking,beam,wedge,blocks,shear_beam] [--engines dda,yade,liggghts]
+    cases crossval [--cases hang,column,rocking,beam,wedge,planar,blocks,shear_beam] [--engines dda,yade,liggghts]
                    [--json] [--keep DIR]
 
 Each case runs one model (cases/scenes/crossval/*.toml, written by cases/make/crossval.py) in every engine through the
@@ -23,6 +23,11 @@ and compares it with a reference computed here, independently of every engine:
   same bisection in-house and in YADE with the rock below each joint as a joint wall (run.extra joint_walls =
   "nearest", adapters/joint_walls.py: an in-house slab, a YADE facet; walled_wedge). `python -m cases.bench.wedge`
   gives the error and cost against the sphere radius.
+- planar: a bonded block of FCC spheres (r = 0.05) on one smooth joint dipping psi = 35 deg, the rock below it
+  fixed, no cohesion, no water: the joint friction at which it starts to slide down the dip, by the same bisection
+  (sliding_onset: the onset machinery takes the case's run, its sliding direction and reference angle, a Sliding).
+  Reference: Hoek & Bray's planar sliding, FS = tan phi / tan psi, so tan phi_c = tan psi. LIGGGHTS runs it as the
+  wedge (mesh wall, rigid clump, fix viscous), its wall contacts damped at PLANAR_LIGGGHTS_DAMPING of critical.
 - rocking: a block cut by a horizontal smooth joint rocks under a sideways push at its top; the heel of the
   joint opens in the first swing and closes again, local damping brings it to rest. In-house and YADE only (no
   smooth joint in LIGGGHTS-PUBLIC), each against the other: the upper part's mean vertical displacement at the
@@ -60,14 +65,14 @@ from pathlib import Path
 import numpy as np
 
 from cases import SCENES
-from cases.make.crossval import WEDGE
+from cases.make.crossval import PLANAR, WEDGE, planar_normal
 
 # The engines (adapters, dda, scipy) are imported inside the functions that use them: `cases crossval --help`
 # and the evaluators that use a reference of this module (detached_reference) load no engine they do not run.
 
 CV = SCENES / "crossval"
 ENGINES = ("dda", "yade", "liggghts")
-CASES = ("hang", "column", "rocking", "beam", "wedge", "blocks", "shear_beam")
+CASES = ("hang", "column", "rocking", "beam", "wedge", "planar", "blocks", "shear_beam")
 SETTLE_TOLERANCE = 1e-3  # the damped beam against its static sag: 0.1 %
 ROCKING_TOLERANCE = 1e-3  # in-house against YADE: 0.1 %
 HANG = ("intact", "fault", "joint", "small_joint")
@@ -80,6 +85,10 @@ SLIDE_TOLERANCE = 0.02
 WEDGE_REST = 1e-4  # a wedge trial that moves less than this many radii in its last quarter has come to rest
 WEDGE_LIGGGHTS_TAU = 0.1  # [s] the LIGGGHTS wedge's fix viscous: gamma = sphere mass / tau (liggghts_wedge)
 WEDGE_WALL_T = 2.4  # [s] a trial of the wedge on joint walls (walled_wedge): it settles onto them for about 1.5 s
+# the LIGGGHTS planar block's wall contacts: normal damping, a ratio of critical (planar_sliding). The clump lands on
+# the wall with its normal springs unloaded and bounces; at every unloading friction lets it slip, so undamped
+# (fix viscous alone) it crept down at 1.005 x psi as fast as at 0.995 x
+PLANAR_LIGGGHTS_DAMPING = 0.3
 
 
 @dataclass
@@ -325,6 +334,41 @@ def _wedge_line(w):
     return geo, (o - p5) / np.linalg.norm(o - p5)
 
 
+def planar_reference(dip):
+    """Hoek & Bray's planar sliding without cohesion, water or a loaded tension crack: FS = tan(phi) / tan(psi),
+    so the critical friction is phi_c = atan(tan psi) [deg]."""
+    return math.degrees(math.atan(math.tan(math.radians(dip))))
+
+
+@dataclass(frozen=True)
+class Sliding:
+    """An onset case of the table: its run scene, the direction the body slides in (unit vector), the reference
+    angle phi_c [deg] and how the row names it, what slides (the row's note), the reference's geometry (`moving`
+    criteria may read it) and the LIGGGHTS run's contact damping ratio (liggghts_wedge)."""
+    name: str
+    scene: Path
+    line: np.ndarray
+    phi_c: float
+    reference: str
+    body: str
+    geo: object = None
+    liggghts_damping: float = 0.0
+
+
+def wedge_sliding():
+    """The sphere wedge: it slides along the line of intersection of its joints; reference Hoek & Bray."""
+    geo, line = _wedge_line(WEDGE)
+    return Sliding("wedge", CV / "wedge.toml", line, geo.critical_friction, "Hoek & Bray", "wedge", geo)
+
+
+def planar_sliding():
+    """The block on one planar joint: it slides down the joint's dip; reference tan phi_c = tan psi. In LIGGGHTS
+    the clump's wall contacts are damped at PLANAR_LIGGGHTS_DAMPING of critical (liggghts_wedge)."""
+    _, down = planar_normal()
+    return Sliding("planar", CV / "planar.toml", down, planar_reference(PLANAR["dip"]), "tan phi = tan psi", "block",
+                   liggghts_damping=PLANAR_LIGGGHTS_DAMPING)
+
+
 def rigid_core(run, bonds=3):
     """(n,) bool: the spheres a wedge run keeps: the fixed ones and the free spheres that at least `bonds` bonds
     tie to kept spheres (peeled off one layer after another until none has fewer). The bonds carry no moment
@@ -349,59 +393,73 @@ def without(run, keep):
     return run.subset(keep)
 
 
-def wedge_run(path=None, core=True):
-    """The wedge's SphereRun (scene `path`, default cases/scenes/crossval/wedge.toml), without the free spheres
-    that fewer than three bonds hold (rigid_core) unless `core` is false."""
+def sliding_run(case, path=None, core=True):
+    """The SphereRun of an onset case (scene `path`, default the case's), without the free spheres that fewer than
+    three bonds hold (rigid_core) unless `core` is false."""
     from adapters.spec import from_scene
 
-    run = from_scene(path or CV / "wedge.toml")
+    run = from_scene(path or case.scene)
     return without(run, rigid_core(run)) if core else run
 
 
+def wedge_run(path=None, core=True):
+    """The wedge's SphereRun (scene `path`, default cases/scenes/crossval/wedge.toml): sliding_run."""
+    return sliding_run(wedge_sliding(), path, core)
+
+
 def wedge_slides(s, run, geo):
-    """A wedge trial slides when the wedge has not come to rest: its displacement along the line of intersection
-    (s at T/2, 3T/4, T) grew by more than WEDGE_REST radii in the last quarter. A wedge that holds comes to rest
-    after the start-up (its last quarter moves by 1e-9 m at r = 0.5 and 19.715 deg); just below the critical
-    angle local damping can hold a sliding wedge at a steady creep (at 19.69 deg 0.47 mm in every 0.6 s, for
-    4.8 s), which a test for acceleration calls holding. The criterion before this one asked for an acceleration
-    of 1 % of the driving one (the last quarter 7/32 x 1 % g sin(plunge) T^2), which alone puts the onset 0.92 %
-    low (tan phi 1 % below tan phi_c), 1.03 % with local damping's slower slide, and 1.17 % with the start-up."""
+    """A trial slides when the body has not come to rest: its displacement along the sliding direction (s at T/2,
+    3T/4, T) grew by more than WEDGE_REST radii in the last quarter (every onset case). A wedge that holds comes
+    to rest after the start-up (its last quarter moves by 1e-9 m at r = 0.5 and 19.715 deg); just below the
+    critical angle local damping can hold a sliding wedge at a steady creep (at 19.69 deg 0.47 mm in every 0.6 s,
+    for 4.8 s), which a test for acceleration calls holding. The criterion before this one asked for an
+    acceleration of 1 % of the driving one (the last quarter 7/32 x 1 % g sin(plunge) T^2), which alone puts the
+    onset 0.92 % low (tan phi 1 % below tan phi_c), 1.03 % with local damping's slower slide, and 1.17 % with the
+    start-up."""
     return s[2] - s[1] > WEDGE_REST * float(np.min(run.radii))
 
 
-def wedge_trial(engine, base, phi, work, timeout=None, moving=wedge_slides, walls=False):
-    """One trial of the wedge run `base` (wedge_run) at joint friction `phi` [deg] in `engine`: (slides,
-    displacement along the line of intersection at T/2, 3T/4, T) with `moving(s, run, geo)` deciding. `walls`:
-    the rock below the joints as joint walls (walled_wedge; LIGGGHTS always runs the wedge so)."""
-    geo, line = _wedge_line(WEDGE)
-    wedge = ~base.fixed
+def sliding_trial(case, engine, base, phi, work, timeout=None, moving=wedge_slides, walls=False):
+    """One trial of the onset case `case` (a Sliding) on its run `base` (sliding_run) at joint friction `phi`
+    [deg] in `engine`: (slides, displacement along the sliding direction at T/2, 3T/4, T) with
+    `moving(s, run, case.geo)` deciding. `walls`: the rock below the joints as joint walls (walled_wedge;
+    LIGGGHTS always runs on walls, liggghts_wedge)."""
+    body = ~base.fixed
     run = replace(base, joint_friction_deg=float(phi))
     variant = None
     if engine == "liggghts":
-        run, variant = liggghts_wedge(run), "clumps"
+        run, variant = liggghts_wedge(run, case.liggghts_damping), "clumps"
     elif walls:
         run = walled_wedge(run)
-    wk = Path(work) / f"wedge_{engine}{'_walls' if walls else ''}_{phi:.4f}"
+    wk = Path(work) / f"{case.name}_{engine}{'_walls' if walls else ''}_{phi:.4f}"
     wk.mkdir(parents=True, exist_ok=True)
     run.save(wk / "run.npz")
     res = run_engine(engine, wk / "run.npz", wk, timeout, run=run, variant=variant)
-    s = _along(res, wedge, base.radii[wedge] ** 3, line, run.duration)
-    return bool(moving(s, run, geo)), s
+    s = _along(res, body, base.radii[body] ** 3, case.line, run.duration)
+    return bool(moving(s, run, case.geo)), s
 
 
-def liggghts_wedge(run):
-    """The wedge run as LIGGGHTS runs it (deck variant "clumps"): LIGGGHTS-PUBLIC has no smooth joint, and on
-    the fixed spheres' bumps the wedge interlocks (it held at 1.2 deg), so the rock below each joint is a plane
-    mesh wall with the joint friction (run.extra liggghts_joint_walls, adapters/liggghts_walls.py). The wedge is
-    one rigid body: LIGGGHTS' harmonic bonds are central springs, so a bonded sphere turns freely and rolls on
-    the wall like a ball bearing (at 18 deg the bonded wedge slid at 4.1 m/s2, nearly the frictionless 4.4).
-    No local damping in LIGGGHTS: fix viscous gamma = m / WEDGE_LIGGGHTS_TAU per sphere takes out the settling
-    onto the walls (the wedge first rests on its lowest sphere on each wall and turns by 0.6 deg) and the
-    contact vibrations; below phi_c the wedge then creeps at a tau (a its acceleration), 0.13 delta m in the last
-    quarter at tan phi = (1 - delta) tan phi_c, so a trial slides from delta = 4e-4 (WEDGE_REST). Measured: the
-    onset's bracket 19.692-19.707 deg at tau = 0.05, 0.1 and 0.2 s; undamped +0.51 %."""
+def wedge_trial(engine, base, phi, work, timeout=None, moving=wedge_slides, walls=False):
+    """One trial of the wedge run `base` (wedge_run): sliding_trial of wedge_sliding()."""
+    return sliding_trial(wedge_sliding(), engine, base, phi, work, timeout, moving, walls)
+
+
+def liggghts_wedge(run, damping=0.0):
+    """An onset case's run as LIGGGHTS runs it (deck variant "clumps"; the wedge and the planar block alike):
+    LIGGGHTS-PUBLIC has no smooth joint, and on the fixed spheres' bumps the wedge interlocks (it held at 1.2 deg),
+    so the rock below each joint is a plane mesh wall with the joint friction (run.extra liggghts_joint_walls,
+    adapters/liggghts_walls.py). The body is one rigid clump: LIGGGHTS' harmonic bonds are central springs, so a
+    bonded sphere turns freely and rolls on the wall like a ball bearing (at 18 deg the bonded wedge slid at
+    4.1 m/s2, nearly the frictionless 4.4). No local damping in LIGGGHTS: fix viscous gamma = m /
+    WEDGE_LIGGGHTS_TAU per sphere takes out the settling onto the walls (the wedge first rests on its lowest
+    sphere on each wall and turns by 0.6 deg) and the contact vibrations; below phi_c the wedge then creeps at
+    a tau (a its acceleration), 0.13 delta m in the last quarter at tan phi = (1 - delta) tan phi_c, so a trial
+    slides from delta = 4e-4 (WEDGE_REST). Measured: the onset's bracket 19.692-19.707 deg at tau = 0.05, 0.1
+    and 0.2 s; undamped +0.51 %. `damping` > 0: the contacts' normal damping ratio (run.damping) instead of the
+    run's own (the planar block, PLANAR_LIGGGHTS_DAMPING)."""
     m = run.density * 4.0 / 3.0 * math.pi * float(np.mean(np.asarray(run.radii) ** 3))
-    return replace(run, extra={**run.extra, "joint_walls": "pairs", "liggghts_viscous": m / WEDGE_LIGGGHTS_TAU})
+    out = replace(run, extra={**run.extra, "joint_walls": "pairs", "liggghts_viscous": m / WEDGE_LIGGGHTS_TAU})
+    return replace(out, damping=float(damping)) if damping > 0 else out
 
 
 def walled_wedge(run):
@@ -414,22 +472,22 @@ def walled_wedge(run):
                    extra={**run.extra, "joint_walls": "nearest"})
 
 
-def wedge_onset(engine, work, timeout=None, path=None, bracket=(0.95, 1.05), iterations=7, core=True,
-                moving=wedge_slides, walls=False):
-    """Bisection of the sphere wedge's joint friction in `engine`: starts from `bracket` x Hoek & Bray's critical
-    angle (widened while both ends agree), then `iterations` halvings; each trial is wedge_trial (`moving`
-    decides). Returns a dict: lo (slides), hi (holds), found (False when no bracket was found: lo and hi then
-    name the last two ends tried), trials [(phi, slides, s)], the run (its spheres) and the critical angle
-    phi_c. `walls`: on joint walls (wedge_trial)."""
-    base = wedge_run(path, core)
+def sliding_onset(case, engine, work, timeout=None, path=None, bracket=(0.95, 1.05), iterations=7, core=True,
+                  moving=wedge_slides, walls=False):
+    """Bisection of the joint friction of the onset case `case` (a Sliding) in `engine`: starts from `bracket` x
+    the reference angle case.phi_c (widened while both ends agree), then `iterations` halvings; each trial is
+    sliding_trial (`moving` decides). Returns a dict: lo (slides), hi (holds), found (False when no bracket was
+    found: lo and hi then name the last two ends tried), trials [(phi, slides, s)], the run (its spheres) and
+    phi_c. `path`: another run scene; `walls`: on joint walls (sliding_trial)."""
+    base = sliding_run(case, path, core)
     trials = []
 
     def slides(phi):
-        moved, s = wedge_trial(engine, base, phi, work, timeout, moving, walls)
+        moved, s = sliding_trial(case, engine, base, phi, work, timeout, moving, walls)
         trials.append((float(phi), moved, s))
         return moved
 
-    phi_c = wedge_reference(WEDGE).critical_friction
+    phi_c = case.phi_c
     lo, hi = bracket[0] * phi_c, bracket[1] * phi_c
     s_lo, s_hi = slides(lo), slides(hi)
     while not s_lo and lo > 2.0:  # holds at both ends: look lower
@@ -449,18 +507,26 @@ def wedge_onset(engine, work, timeout=None, path=None, bracket=(0.95, 1.05), ite
                 phi_c=phi_c)
 
 
-def case_wedge(engines, work, say, timeout, iterations=7):
-    """The sphere wedge's onset by bisection of the joint friction (wedge_onset) in every engine, on smooth joints
-    (LIGGGHTS: on walls) and, in-house and in YADE, also on joint walls (walled_wedge: row wedge_walls)."""
+def wedge_onset(engine, work, timeout=None, path=None, bracket=(0.95, 1.05), iterations=7, core=True,
+                moving=wedge_slides, walls=False):
+    """Bisection of the sphere wedge's joint friction in `engine` from Hoek & Bray's critical angle:
+    sliding_onset of wedge_sliding()."""
+    return sliding_onset(wedge_sliding(), engine, work, timeout, path, bracket, iterations, core, moving, walls)
+
+
+def onset_rows(case, engines, work, say, timeout, iterations=7, walls=("dda", "yade")):
+    """The rows of an onset case (a Sliding): its bisection (sliding_onset) in every engine, on smooth joints
+    (LIGGGHTS: on walls) and, in the engines of `walls`, also on joint walls (walled_wedge: row NAME_walls)."""
     rows = []
-    phi_c = wedge_reference(WEDGE).critical_friction
-    runs = [(eng, False) for eng in engines] + [(eng, True) for eng in engines if eng in ("dda", "yade")]
-    for eng, walls in runs:
+    phi_c = case.phi_c
+    runs = [(eng, False) for eng in engines] + [(eng, True) for eng in engines if eng in walls]
+    for eng, on_walls in runs:
         t0 = time.perf_counter()
-        b = wedge_onset(eng, work, timeout, iterations=iterations, walls=walls)
+        b = sliding_onset(case, eng, work, timeout, iterations=iterations, walls=on_walls)
         lo, hi, run = b["lo"], b["hi"], b["run"]
-        case = "wedge_walls" if walls else "wedge"
-        extra = _wedge_note(eng, walls)
+        name = f"{case.name}_walls" if on_walls else case.name
+        extra = _onset_note(case, eng, on_walls)
+        reference = f"{phi_c:.3f} deg ({case.reference})"
         if b["found"]:
             got = 0.5 * (lo + hi)
             err = got / phi_c - 1.0
@@ -468,38 +534,53 @@ def case_wedge(engines, work, say, timeout, iterations=7):
                     f"{lo:.3f}-{hi:.3f}, {len(b['trials'])} runs")
             if extra:
                 note += "; " + extra
-            rows.append(Row(case, eng, f"{got:.3f} deg", f"{phi_c:.3f} deg (Hoek & Bray)", f"{100 * err:+.2f} %",
+            rows.append(Row(name, eng, f"{got:.3f} deg", reference, f"{100 * err:+.2f} %",
                             abs(err) <= ONSET_TOLERANCE, time.perf_counter() - t0, note=note,
                             value=got, ref_value=phi_c, err_value=err))
         else:
-            rows.append(Row(case, eng, f"{b['where']} at {lo:.1f} and {hi:.1f} deg",
-                            f"{phi_c:.3f} deg (Hoek & Bray)", "no onset found", False, time.perf_counter() - t0,
-                            note=extra, ref_value=phi_c))
+            rows.append(Row(name, eng, f"{b['where']} at {lo:.1f} and {hi:.1f} deg", reference, "no onset found",
+                            False, time.perf_counter() - t0, note=extra, ref_value=phi_c))
         if say:
             say(_line(rows[-1]))
-    if "dda" in engines:
-        rows.append(_dda_block_wedge(phi_c, say))
     return rows
 
 
-def _wedge_note(engine, walls=False):
+def case_wedge(engines, work, say, timeout, iterations=7):
+    """The sphere wedge's onset by bisection of the joint friction (wedge_onset) in every engine, on smooth joints
+    (LIGGGHTS: on walls) and, in-house and in YADE, also on joint walls (walled_wedge: row wedge_walls)."""
+    case = wedge_sliding()
+    rows = onset_rows(case, engines, work, say, timeout, iterations)
+    if "dda" in engines:
+        rows.append(_dda_block_wedge(case.phi_c, say))
+    return rows
+
+
+def case_planar(engines, work, say, timeout, iterations=7):
+    """Planar sliding of a bonded block on one smooth joint: the onset by bisection of the joint friction in every
+    engine (LIGGGHTS: the rock below the joint a mesh wall, the block a rigid clump) against tan phi = tan psi."""
+    return onset_rows(planar_sliding(), engines, work, say, timeout, iterations, walls=())
+
+
+def _onset_note(case, engine, walls=False):
+    each = "each joint" if case.name == "wedge" else "the joint"
     if engine == "liggghts":
-        return ("no smooth joint in LIGGGHTS-PUBLIC: the rock below each joint is a mesh wall (fix wall/gran, joint "
-                "friction), the wedge a rigid clump, fix viscous m / 0.1 s")
+        damped = f", wall contacts damped at {case.liggghts_damping:g} of critical" if case.liggghts_damping else ""
+        return (f"no smooth joint in LIGGGHTS-PUBLIC: the rock below {each} is a mesh wall (fix wall/gran, joint "
+                f"friction), the {case.body} a rigid clump, fix viscous m / {WEDGE_LIGGGHTS_TAU:g} s{damped}")
     if walls:
-        return (f"the rock below each joint a {'facet' if engine == 'yade' else 'slab'} with the joint friction "
+        return (f"the rock below {each} a {'facet' if engine == 'yade' else 'slab'} with the joint friction "
                 f"(joint_walls = nearest), {WEDGE_WALL_T:g} s per run")
     return ""
 
 
-def _along(res, wedge, weight, line, T):
-    """Mass-weighted mean displacement of the wedge's spheres along `line` at T/2, 3T/4 and T."""
+def _along(res, body, weight, line, T):
+    """Mass-weighted mean displacement of the spheres `body` along `line` at T/2, 3T/4 and T."""
     if res.pos is None or len(res.time) < 3:
-        raise RuntimeError(f"{res.engine}: the wedge run recorded no positions")
+        raise RuntimeError(f"{res.engine}: the onset run recorded no positions")
     out = []
     for frac in (0.5, 0.75, 1.0):
         k = int(np.argmin(np.abs(res.time - frac * T)))
-        d = res.pos[k][wedge] - res.x0[wedge]
+        d = res.pos[k][body] - res.x0[body]
         out.append(float(np.average(d @ line, weights=weight)))
     return out
 
@@ -619,7 +700,8 @@ def crossval(cases=CASES, engines=ENGINES, work=None, say=None, timeout=1800.0):
     try:
         for case in cases:
             fn = {"hang": case_hang, "column": case_column, "rocking": case_rocking, "beam": case_beam,
-                  "wedge": case_wedge, "blocks": case_blocks, "shear_beam": case_shear_beam}[case]
+                  "wedge": case_wedge, "planar": case_planar, "blocks": case_blocks,
+                  "shear_beam": case_shear_beam}[case]
             rows += fn(engines, work, say, timeout)
     finally:
         if own:
