@@ -74,6 +74,19 @@ class GeoScene(DDAScene):
     left_out = (0, 0.0)  # (blocks, m3) left out of the run: needles the engine's convexity check refuses even as hulls
     small_fixed = 0  # blocks below [blocks] min_volume held fixed (they would set the time step)
     hulled = 0  # blocks replaced by their convex hull (not convex within the engine's tolerance after snapping)
+    # the keys the step limit's message names (dda/limits.py): the run settings are [blocks.run]'s, and an sgim
+    # scene has no max_steps key (only --max-steps raises the limit)
+    run_keys = {"duration": "blocks.run.duration", "dt": "blocks.run.dt", "raise_limit": "raise --max-steps"}
+
+    def stiffness_keys(self):
+        """[(key, kn)] of the stiffnesses in the run: [blocks] kn and every [[blocks.law]] kn of a law that made a
+        face (dda/limits.py names the largest when it sets a time step past the step limit)."""
+        rows = self.law_rows()
+        out = [("blocks.kn", float(self.spec.kn))]
+        for k, (name, law) in enumerate(self.spec.laws.items()):
+            if law.kn is not None and f"law:{name}" in rows:
+                out.append((f"blocks.law[{k}].kn", float(law.kn)))
+        return out
 
     def law_rows(self):
         """{row name: ContactLaw}: the intact row and one per law name that made a face."""

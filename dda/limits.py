@@ -42,11 +42,15 @@ def limit_for(scene=None, max_steps=None):
 
 def block_dt_source(scene):
     """(key, value) of the stiffness that sets a block scene's critical step: the largest kn of [contact] and
-    the [[contact_pair]] laws."""
-    key, kn = "contact.kn", float(scene.law.kn)
-    for k, law in enumerate(scene.pair_laws.values()):
-        if float(law.kn) > kn:
-            key, kn = f"contact_pair[{k}].kn", float(law.kn)
+    the [[contact_pair]] laws, or of the scene's own ``stiffness_keys()`` (the block run of an sgim scene:
+    [blocks] kn and the [[blocks.law]] kn, dda/georun.py)."""
+    own = getattr(scene, "stiffness_keys", None)
+    pairs = own() if own is not None else [("contact.kn", float(scene.law.kn))] + [
+        (f"contact_pair[{k}].kn", float(law.kn)) for k, law in enumerate(scene.pair_laws.values())]
+    key, kn = pairs[0]
+    for k, v in pairs[1:]:
+        if v > kn:
+            key, kn = k, v
     return key, kn
 
 
@@ -100,14 +104,18 @@ def check(path, duration, dt, *, dt_key, dt_value, auto_dt, dt_crit=None, safety
 
 
 def check_block_run(scene, sim, max_steps=None, duration=None):
-    """The step check of a block scene's Simulation `sim` (DDAScene.build)."""
+    """The step check of a block scene's Simulation `sim` (DDAScene.build). A scene whose run settings live under
+    other keys (the block run of an sgim scene: [blocks.run]) names them in ``run_keys``: "duration", "dt" and
+    "raise_limit" (the remedy's wording for the step limit)."""
     duration = scene.duration if duration is None else duration
+    keys = getattr(scene, "run_keys", None) or {}
+    named = dict(duration_key=keys.get("duration", "simulation.duration"), raise_limit=keys.get("raise_limit"))
     if scene.dt is not None:
-        return check(scene.path, duration, sim.dt, dt_key="simulation.dt", dt_value=scene.dt, auto_dt=False,
-                     max_steps=max_steps, scene=scene)
+        return check(scene.path, duration, sim.dt, dt_key=keys.get("dt", "simulation.dt"), dt_value=scene.dt,
+                     auto_dt=False, max_steps=max_steps, scene=scene, **named)
     key, value = block_dt_source(scene)
     return check(scene.path, duration, sim.dt, dt_key=key, dt_value=value, auto_dt=True, dt_crit=sim.dt_crit,
-                 safety=scene.safety, max_steps=max_steps, scene=scene)
+                 safety=scene.safety, max_steps=max_steps, scene=scene, **named)
 
 
 def check_sphere_run(scene, ss, sim, max_steps=None, duration=None):

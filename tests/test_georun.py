@@ -10,7 +10,8 @@
   outside (a brute-force test of the point against the disc's radius), and a cemented (intact) contact is bonded
   at the start;
 - `dda run SCENE.toml` on an sgim scene writes the run's outputs and summary (blocks moved), and a scene without
-  [blocks.run] duration is refused in one line naming the key.
+  [blocks.run] duration is refused in one line naming the key; a run past the step limit is refused naming the
+  [blocks] / [blocks.run] / [[blocks.law]] key that caused it.
 """
 import json
 import math
@@ -206,6 +207,33 @@ def test_dda_run_cli_on_an_sgim_scene(tmp_path):
     r = subprocess.run([sys.executable, "-m", "dda.cli", "run", str(scene), "-o", str(tmp_path / "o2")],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 2 and "blocks.run.duration" in r.stderr and not (tmp_path / "o2").exists()
+
+
+@pytest.mark.parametrize("change,first,named", [
+    (("kn = 1.0e10 ", "kn = 1e30 "), "blocks.kn = 1e+30", ("blocks.run.duration = 1.5 s is",)),
+    (("duration = 1.5", "duration = 1e9"), "blocks.run.duration = 1000000000.0", ("lower blocks.kn = 1e+10",)),
+    (("sleep = false", "sleep = false\ndt = 1e-12"), "blocks.run.dt = 1e-12", ("raise blocks.run.dt",)),
+    (("sleep = false", 'sleep = false\n\n[[blocks.law]]\nname = "J2"\nkn = 1e30'), "blocks.law[0].kn = 1e+30",
+     ("lower blocks.law[0].kn",))])
+def test_step_limit_of_an_sgim_block_run_names_the_keys_the_scene_has(tmp_path, capsys, change, first, named):
+    """dda run of cases/scenes/tunnel_blocks.toml made absurd (stiffness, duration, dt, a [[blocks.law]]'s
+    stiffness) is refused in one line that names the key written in the scene ([blocks], [blocks.run],
+    [[blocks.law]]), never the DDA scene's contact.kn / simulation.duration, and only --max-steps as the limit's
+    remedy (an sgim scene has no max_steps key); no output folder."""
+    from dda.cli import main as dda_main
+
+    text = (SCENES / "tunnel_blocks.toml").read_text()
+    assert change[0] in text
+    scene = tmp_path / "tunnel.toml"
+    scene.write_text(text.replace(change[0], change[1], 1))
+    out = tmp_path / "out"
+    assert dda_main(["run", str(scene), "-o", str(out), "--quiet"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"dda: error: {scene}: {first}"), lines
+    for key in named + ("past max_steps = 1e+08", "raise --max-steps"):
+        assert key in lines[0], lines[0]
+    assert "simulation." not in lines[0] and "contact." not in lines[0], lines[0]
+    assert not out.exists()
 
 
 def _value(v):
