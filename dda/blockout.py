@@ -21,7 +21,7 @@ import numpy as np
 
 from sgim.common import FORCE_HELP, CliError, progress_printer
 from sgim.outdir import output_folder
-from sgim.scene import load_scene
+from sgim.scene import load_scene, parse_cut
 
 from .shapes import GeometryError
 
@@ -31,6 +31,12 @@ def cmd_blocks(args):
     from .geoblocks import build_blocks, write_blocks
 
     scene = load_scene(args.scene)
+    cut_away = scene.render.cut_away if args.cut_away is None else args.cut_away
+    for c in cut_away:
+        try:
+            parse_cut(c)
+        except ValueError as exc:
+            raise CliError(f"--cut-away = {c!r}: {exc}") from None
     out = Path(args.output)
     if out.exists() and not out.is_dir():
         raise CliError(f"{out}: -o = {str(out)!r}: output exists and is not a folder")
@@ -43,7 +49,8 @@ def cmd_blocks(args):
     with dest.assemble() as tmp:
         summary = write_blocks(model, tmp)
         if args.png:
-            render_blocks(model, tmp / "blocks.png", title=f"{scene.name}: {summary['blocks']} blocks")
+            render_blocks(model, tmp / "blocks.png", title=f"{scene.name}: {summary['blocks']} blocks",
+                          cut_away=cut_away)
     if args.json:
         print(json.dumps(summary, indent=2))
     elif not args.quiet:
@@ -60,6 +67,9 @@ def add_blocks_parser(sub):
     b.add_argument("--quiet", action="store_true", help="no progress lines")
     b.add_argument("--json", action="store_true", help="print summary.json to stdout")
     b.add_argument("--png", action="store_true", help="also blocks.png: the faces in the sphere picture's colours")
+    b.add_argument("--cut-away", action="append", default=None, metavar="EXPR",
+                   help="blocks.png leaves out the blocks whose centroid meets every condition, like 'y<0' (repeat "
+                        "for a corner; default the scene's [render] cut_away)")
     b.add_argument("--force", action="store_true", help=FORCE_HELP)
     b.set_defaults(func=cmd_blocks)
     return b
@@ -85,15 +95,21 @@ def face_colours(model, tris_owner_block, tris_owner_face, centroids):
     return rgb
 
 
-def render_blocks(model, path, width=1600, height=1100, title=None):
-    """blocks.png: the block model's faces in the sphere picture's colours (face_colours), edges drawn."""
+def render_blocks(model, path, width=1600, height=1100, title=None, cut_away=()):
+    """blocks.png: the block model's faces in the sphere picture's colours (face_colours), edges drawn; the blocks
+    whose centroid meets every condition of ``cut_away`` (the scene's [render] cut_away, as in sgim's picture:
+    ``["y<6"]``) are left out, so that the inside shows."""
     import pyvista as pv  # not at the top: pyvista loads only when a picture is drawn
 
-    from sgim.render import Frame
+    from sgim.render import Frame, cut_mask
 
     from .geoblocks import block_mesh
 
     pts, tris, data, _ = block_mesh(model)
+    if len(cut_away) and len(tris):
+        gone = cut_mask(np.array([b.volume_centroid()[1] for b in model.blocks]), cut_away)
+        keep = ~gone[data["block"]]
+        tris, data = tris[keep], {k: v[keep] for k, v in data.items()}
     cen = pts[tris].mean(1)
     rgb = face_colours(model, data["block"], data["face"], cen)
     mesh = pv.PolyData(pts, np.hstack([np.full((len(tris), 1), 3), tris]).astype(np.int64))

@@ -410,3 +410,18 @@ def test_grid_finds_the_blocks_a_scan_of_every_box_finds():
     grid.to_pool(back)
     assert back.blocks == pool.blocks
     np.testing.assert_array_equal(back.lo, pool.lo)
+
+
+def test_dda_blocks_bad_cut_away_is_refused_before_cutting(tmp_path, capsys):
+    """dda blocks --png --cut-away with a bad expression: one line naming the option and value, exit 2, no
+    output folder (the picture's cut-away leaves out the blocks whose centroid meets every condition, as
+    sgim's cut_mask does for spheres)."""
+    from dda.cli import main as dda_main
+
+    scene = tmp_path / "pit.toml"
+    scene.write_text(_toml(pit_scene()))
+    out = tmp_path / "out"
+    assert dda_main(["blocks", str(scene), "-o", str(out), "--png", "--cut-away", "q<1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--cut-away = 'q<1'" in err[0], err
+    assert not out.exists()
