@@ -12,6 +12,9 @@ The refusal is one SceneError line naming what caused the count, the dt and the 
 * otherwise the key that set the time step: ``simulation.dt`` when the scene gives it, else the stiffness that
   sets the critical step (``contact.kn``, ``contact_pair[k].kn``, ``contact.ks``, ``spheres.bond_young`` /
   ``spheres.bond_kn``): ``contact.kn = 1e+30: sets dt = 5.6e-15 s (...)``.
+
+The block run of an sgim scene (dda/georun.py) names its own keys: ``blocks.run.duration``, ``blocks.run.dt``,
+``blocks.kn`` or ``blocks.law[k].kn``, and only ``--max-steps`` to raise the limit (such a scene has no max_steps).
 """
 from __future__ import annotations
 
