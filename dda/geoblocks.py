@@ -264,9 +264,9 @@ class _Grid:
             for j, b in enumerate(pieces):
                 k = self.next
                 self.next += 1
-                if k >= len(self.lo):
-                    self.lo = np.concatenate([self.lo, np.empty_like(self.lo)])
-                    self.hi = np.concatenate([self.hi, np.empty_like(self.hi)])
+                if k >= len(self.lo):  # room for as many again (at least 64)
+                    more = np.empty((max(len(self.lo), 64), 3))
+                    self.lo, self.hi = np.concatenate([self.lo, more]), np.concatenate([self.hi, more])
                 self.lo[k], self.hi[k] = b.v.min(0), b.v.max(0)
                 self.blocks[k], self.key[k] = b, key + (j,)
                 self._file(k)
