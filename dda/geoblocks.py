@@ -197,8 +197,9 @@ class _Grid:
             self._file(i)
 
     def _range(self, lo, hi):
-        a = np.clip(np.floor((np.asarray(lo) - self.g0) / self.cell).astype(np.int64), 0, self.dims - 1)
-        b = np.clip(np.floor((np.asarray(hi) - self.g0) / self.cell).astype(np.int64), 0, self.dims - 1)
+        # floor_divide: the same cell as _file's // for every coordinate (floor(x / h) can round up to the next)
+        a = np.clip(np.floor_divide(np.asarray(lo) - self.g0, self.cell).astype(np.int64), 0, self.dims - 1)
+        b = np.clip(np.floor_divide(np.asarray(hi) - self.g0, self.cell).astype(np.int64), 0, self.dims - 1)
         return a, b
 
     def _cell_ids(self, lo, hi):
