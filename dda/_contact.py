@@ -40,7 +40,8 @@ def point_force(kn, ks, tanphi, coh_force, ten_force, zeta, meff, depth, n, vrel
     fd = -2.0 * zeta * np.sqrt(kn * meff) * vn if zeta > 0.0 else 0.0
     if not bonded and fn_el + fd < 0.0:
         fd = -fn_el
-    # shear: elastic shear displacement of B relative to A
+    # shear: elastic shear displacement of B relative to A (u0: last step's)
+    u00, u01, u02 = us[0], us[1], us[2]
     for a in range(3):
         us[a] += (vrel[a] - vn * n[a]) * dt
     fs0 = -ks * us[0]
@@ -67,7 +68,12 @@ def point_force(kn, ks, tanphi, coh_force, ten_force, zeta, meff, depth, n, vrel
                 return OPEN, False, 0.0, 0.0, rel, 0.0
         state = SLIDING
         scale = fmax / fsm
-        diss = fmax * (fsm - fmax) / ks
+        # the trial displacement t = us is cut back to scale t: the spring took the work of its mean force over
+        # the increment, 1/2 ks (u0 + scale t).(t - u0), and keeps 1/2 ks scale^2 t^2 of it (the same
+        # product-form pairing of forces and half-step velocities as the kinetic energy's; fmax (fsm - fmax) / ks
+        # holds only while the limit stays put, and misses what a falling limit takes, e.g. as a point unloads)
+        tu = us[0] * u00 + us[1] * u01 + us[2] * u02
+        diss = 0.5 * ks * (1.0 - scale) * (scale * (us[0] * us[0] + us[1] * us[1] + us[2] * us[2]) + tu)
         fs0 *= scale
         fs1 *= scale
         fs2 *= scale

@@ -33,10 +33,10 @@ from ._fcp import MAXP
 from ._kinematics import ang_vel, place_vertices, quat_matrix, turn, turned
 from ._narrow import carry_resting, hash_pairs, narrow_phase
 from ._state import (ACC_DRIVER, ACC_SLEEPING, C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE,
-                     E_DAMPING, E_ELASTIC, E_FRICTION, E_KIN, E_LOCAL, E_POT, NCOUNT, NTALLY, ST_AWAKE,
-                     ST_CONTACTS, ST_FCP_ITER, ST_MAXDEPTH, ST_NEED, ST_PAIRS, ST_POINTS, ST_SAT, ST_SLIDING,
-                     ST_STATUS, ST_STEPS, T_DAMPING, T_ELASTIC, T_FRICTION, T_KIN, T_LOCAL, T_MAXDEPTH, T_POT,
-                     Lists, Work)
+                     E_DAMPING, E_ELASTIC, E_FRICTION, E_KIN, E_LOCAL, E_POT, E_TURNOVER, NCOUNT, NTALLY,
+                     ST_AWAKE, ST_CONTACTS, ST_FCP_ITER, ST_MAXDEPTH, ST_NEED, ST_PAIRS, ST_POINTS, ST_SAT,
+                     ST_SLIDING, ST_STATUS, ST_STEPS, T_DAMPING, T_ELASTIC, T_FRICTION, T_KIN, T_LOCAL, T_MAXDEPTH,
+                     T_POT, T_TURNOVER, Lists, Work)
 
 OK, NEED_CAPACITY, BLOWUP = 0, 1, 2
 
@@ -405,6 +405,7 @@ def close_step(npair, nactive, acc, books, tally, count):
     energy[E_FRICTION] += tally[T_FRICTION]
     energy[E_DAMPING] += tally[T_DAMPING]
     energy[E_LOCAL] += tally[T_LOCAL]
+    energy[E_TURNOVER] += tally[T_TURNOVER]
     stats[ST_MAXDEPTH] = tally[T_MAXDEPTH]
     stats[ST_CONTACTS] = count[C_CONTACTS]
     stats[ST_POINTS] = count[C_POINTS]
@@ -418,8 +419,8 @@ def close_step(npair, nactive, acc, books, tally, count):
 def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads, forces, geom, grid, lists, sleep,
               con, law, books):
     """Advance `nsteps` steps; the state is in the bundles of dda/_state.py (Blocks, Deform, Loads, Forces,
-    Geometry, Grid, Lists, Sleep, Contacts, Law, Books). books.energy = [KE, PE, elastic, fric, damp, local]
-    (last three cumulative), books.stats has the ST_* slots.
+    Geometry, Grid, Lists, Sleep, Contacts, Law, Books). books.energy = [KE, PE, elastic, fric, damp, local,
+    turnover] (last four cumulative), books.stats has the ST_* slots.
 
     Loads and prescribed motion: ``blocks.kin[i]`` blocks move at their velocity ``vel[i]`` and world angular
     velocity ``wpres[i]`` whatever the forces (their contact forces do work counted in ``acc[ACC_DRIVER]``);

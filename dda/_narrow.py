@@ -32,11 +32,112 @@ from numba import njit
 
 from ._contact import point_force
 from ._deform import add_strain_force, body_point, point_velocity
-from ._fcp import MAXP, contact_points, fcp, gap_along, polygon_area, sat_search
+from ._fcp import MAXP, clip_line, contact_points, fcp, gap_along, polygon_area, sat_search
 from ._kinds import intact_share, law_face, near_history, point_row
 from ._kinematics import quat_matrix, spin
 from ._state import (C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE, LAW_COH, LAW_KN, LAW_KS,
-                     LAW_TANPHI, LAW_TEN, LAW_ZETA, T_DAMPING, T_ELASTIC, T_FRICTION, T_MAXDEPTH)
+                     LAW_TANPHI, LAW_TEN, LAW_ZETA, T_DAMPING, T_ELASTIC, T_FRICTION, T_MAXDEPTH, T_TURNOVER)
+
+
+@njit(cache=True, inline="always")
+def _book_opening(tally, e_n, kt, us, vrel, nrm, dt, fd0, fd1, fd2):
+    """The energy of a point that opens this step (depth <= 0, no bond): its normal spring's state 1/2 fn d_last
+    goes with the half of its last force that the product-form kinetic energy pairs with this step's increment,
+    together 1/2 fn d_now = e_n (point turnover, released; <= 0); likewise its shear spring's 1/2 ks u.(u + du)
+    (released with friction, du = the tangential increment of this step), and the second half of its last damping
+    force (contact damping)."""
+    vn = vrel[0] * nrm[0] + vrel[1] * nrm[1] + vrel[2] * nrm[2]
+    us_du = 0.0
+    uu = 0.0
+    for a in range(3):
+        us_du += us[a] * (vrel[a] - vn * nrm[a]) * dt
+        uu += us[a] * us[a]
+    tally[T_TURNOVER] += e_n
+    tally[T_FRICTION] += 0.5 * kt * (uu + us_du)
+    tally[T_DAMPING] -= 0.5 * dt * (fd0 * vrel[0] + fd1 * vrel[1] + fd2 * vrel[2])
+
+
+@njit(cache=True)
+def _body_point_velocity(b, still, x, blocks):
+    """Velocity of body b's material point at x (half-step; a deformable block's rigid part only) as three
+    scalars; 0 for a body that does not move (`still`)."""
+    if still:
+        return 0.0, 0.0, 0.0
+    pos, vel = blocks.pos, blocks.vel
+    if blocks.kin[b]:
+        w0, w1, w2 = blocks.wpres[b, 0], blocks.wpres[b, 1], blocks.wpres[b, 2]
+    else:
+        w0, w1, w2 = spin(b, blocks.quat, blocks.inertia, blocks.angmom)
+    c0, c1, c2 = _cross(w0, w1, w2, x[0] - pos[b, 0], x[1] - pos[b, 1], x[2] - pos[b, 2])
+    return vel[b, 0] + c0, vel[b, 1] + c1, vel[b, 2] + c2
+
+
+@njit(cache=True)
+def _book_vanished(tally, i, j, still_i, still_j, x, depth, fn, u, fd, ks, nrm, dt, blocks):
+    """The energy of last step's point (at x, depth, normal force fn, shear displacement u, damping force fd)
+    that has no successor this step, as _book_opening does for a point found open: 1/2 fn d_after (point turnover,
+    released; d_after = depth - vn dt from the blocks' velocities at x: <= 0 for a point that opened, about
+    1/2 kn depth^2 for one that a change of the contact polygon dropped while loaded), 1/2 ks u.(u + du)
+    (friction), the second half of its damping force."""
+    a0, a1, a2 = _body_point_velocity(i, still_i, x, blocks)
+    b0, b1, b2 = _body_point_velocity(j, still_j, x, blocks)
+    v0, v1, v2 = b0 - a0, b1 - a1, b2 - a2
+    vn = v0 * nrm[0] + v1 * nrm[1] + v2 * nrm[2]
+    du0, du1, du2 = (v0 - vn * nrm[0]) * dt, (v1 - vn * nrm[1]) * dt, (v2 - vn * nrm[2]) * dt
+    tally[T_TURNOVER] += 0.5 * fn * (depth - vn * dt)
+    tally[T_FRICTION] += 0.5 * ks * (u[0] * (u[0] + du0) + u[1] * (u[1] + du1) + u[2] * (u[2] + du2))
+    tally[T_DAMPING] -= 0.5 * dt * (fd[0] * v0 + fd[1] * v1 + fd[2] * v2)
+
+
+@njit(cache=True)
+def _pierce_point(vert, fnw, fdw, he_origin, he_next, edge_he, e0, e1, g0, g1, n, sgn, tol, out):
+    """The deepest point where an edge of block X (edges e0..e1) runs through block Y (faces g0..g1): the middle
+    of the edge's part inside Y, written into `out`; its depth is Y's extent behind it along the normal n (A -> B):
+    along -n for X = A (sgn = -1), along +n for X = B (sgn = 1), as contact_points measures its points. Returns the
+    depth, or -1 when no edge runs through Y."""
+    best = -1.0
+    d = np.empty(3)
+    P = np.empty(3)
+    for e in range(e0, e1):
+        h = edge_he[e]
+        a = he_origin[h]
+        b = he_origin[he_next[h]]
+        ln = 0.0
+        for c in range(3):
+            d[c] = vert[b, c] - vert[a, c]
+            ln += d[c] * d[c]
+        ln = np.sqrt(ln)
+        if ln == 0.0:
+            continue
+        for c in range(3):
+            d[c] /= ln
+        lo, hi = clip_line(vert[a], d, fnw, fdw, g0, g1, tol, 0.0, sgn)
+        lo = max(lo, 0.0)
+        hi = min(hi, ln)
+        if lo >= hi:
+            continue
+        for c in range(3):
+            P[c] = vert[a, c] + 0.5 * (lo + hi) * d[c]
+        lo, hi = clip_line(P, n, fnw, fdw, g0, g1, tol, 0.0, sgn)
+        depth = -lo if sgn < 0.0 else hi
+        if lo <= hi and depth > best:
+            best = depth
+            for c in range(3):
+                out[c] = P[c]
+    return best
+
+
+@njit(cache=True, inline="always")
+def _unshown(p_depth, k, g):
+    """True when the k contact points (k = -1: none inside the other block) do not show the plane's overlap -g:
+    none reaches half of it."""
+    if k < 0:
+        return True
+    maxd = 0.0
+    for q in range(k):
+        if p_depth[q] > maxd:
+            maxd = p_depth[q]
+    return maxd < -0.5 * g
 
 
 @njit(cache=True, inline="always")
@@ -44,6 +145,17 @@ def _hash_key(key, mask):
     h = key * np.int64(0x9E3779B97F4A7C15 & 0x7FFFFFFFFFFFFFFF)
     h ^= h >> 29
     return h & mask
+
+
+@njit(cache=True, inline="always")
+def _find_slot(key, hmask, htab, key_old):
+    """Last step's slot of the pair `key` (the hash table of hash_pairs), or -1."""
+    h = _hash_key(key, hmask)
+    while htab[h] >= 0:
+        if key_old[htab[h]] == key:
+            return htab[h]
+        h = (h + 1) & hmask
+    return -1
 
 
 @njit(cache=True)
@@ -135,15 +247,15 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
     static, veto, matched, nrm, wake_list = work.static, work.veto, work.matched, work.nrm, work.wake_list
     kin, calm, asleep = blocks.kin, sleep.calm, sleep.asleep
     pos, size_b, material, lawtab, keep_gap = blocks.pos, blocks.size_b, blocks.material, law.tab, law.keep_gap
-    vert, fnw, vs, fs, es = geom.vert, geom.fnw, geom.vs, geom.fs, geom.es
+    vert, fnw, fdw, vs, fs, es = geom.vert, geom.fnw, geom.fdw, geom.vs, geom.fs, geom.es
     he_origin, he_next, he_pair, he_face = geom.he_origin, geom.he_next, geom.he_pair, geom.he_face
     vert_he, edge_he, n_sat = geom.vert_he, geom.edge_he, work.n_sat
     p_pos, p_depth, p_id, scr, iscr, mass = work.p_pos, work.p_depth, work.p_id, work.scr, work.iscr, blocks.mass
     htab, key_old, nrm_old, npt_old, us_old = con.htab, con.key[old], con.nrm[old], con.npt[old], con.us[old]
     key_new, a_new, b_new, nrm_new, npt_new = con.key[new], con.a[new], con.b[new], con.nrm[new], con.npt[new]
-    pid_old, bond_old = con.pid[old], con.bond[old]
+    pid_old, bond_old, fn_old, depth_old = con.pid[old], con.bond[old], con.fn[old], con.depth[old]
     pid_new, us_new, state_new, bond_new = con.pid[new], con.us[new], con.state[new], con.bond[new]
-    pos_new, fn_new, depth_new = con.pos[new], con.fn[new], con.depth[new]
+    pos_new, fn_new, depth_new, fd_old, fd_new = con.pos[new], con.fn[new], con.depth[new], con.fd[old], con.fd[new]
     R, w, X, us, fpt, vrel = work.R, work.w_old, work.w_old, work.us, work.fpt, work.vrel
     vel, quat, fixed, dof12 = blocks.vel, blocks.quat, blocks.fixed, blocks.dof12
     wpres, inertia, angmom = blocks.wpres, blocks.inertia, blocks.angmom
@@ -157,13 +269,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
         j = pb[p]
         key = i * nbody + j
         # 1. last step's slot of the pair
-        slot = -1
-        h = _hash_key(key, hmask)
-        while htab[h] >= 0:
-            if key_old[htab[h]] == key:
-                slot = htab[h]
-                break
-            h = (h + 1) & hmask
+        slot = _find_slot(key, hmask, htab, key_old)
         size = min(size_b[i], size_b[j])
         mi = material[i]
         mj = material[j]
@@ -185,14 +291,18 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
         nrm[1] /= nl
         nrm[2] /= nl
         g, ia, ib, sa, sb = gap_along(vert, vs[i], vs[i + 1], vs[j], vs[j + 1], nrm[0], nrm[1], nrm[2])
+        k = 0
         if g <= kg:
-            # else the Fast Common-Plane search from it, confirmed by the separating-axis search for a new
-            # overlap (no points last step) or a deep one (more than 1 % of the smaller block): FCP's local
-            # search can stop on a poor plane
+            # else the Fast Common-Plane search from it, and (3.) the contact points on its plane (geom: this
+            # kernel's own argument, handed on as it came); the separating-axis search confirms the plane of a new
+            # overlap (no points last step), a deep one (more than 1 % of the smaller block) and one whose points
+            # do not show its overlap (none inside the other block, or none half as deep: the blocks may not touch
+            # at all): FCP's local search can stop on a poor plane, and last step's plane is where it starts
             g, ia, ib, sa, sb, its = fcp(vert, fnw, vs[i], vs[i + 1], vs[j], vs[j + 1], he_origin, he_next, he_pair,
                                          he_face, vert_he, nrm, 1e-13 * size, 50, nrm)
             count[C_FIT] += its
-            if g < 0.0 and (slot < 0 or npt_old[slot] == 0 or g < -0.01 * size):
+            k = contact_points(geom, i, j, nrm, sa, sb, kg, size, p_pos, p_depth, p_id, scr, iscr)
+            if g < 0.0 and (slot < 0 or npt_old[slot] == 0 or g < -0.01 * size or _unshown(p_depth, k, g)):
                 for a in range(3):
                     n_sat[a] = nrm[a]
                 g2 = sat_search(vert, fnw, vs[i], vs[i + 1], fs[i], fs[i + 1], es[i], es[i + 1], vs[j], vs[j + 1],
@@ -202,6 +312,10 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     for a in range(3):
                         nrm[a] = n_sat[a]
                     g, ia, ib, sa, sb = gap_along(vert, vs[i], vs[i + 1], vs[j], vs[j + 1], nrm[0], nrm[1], nrm[2])
+                    k = 0
+                    if g <= kg:
+                        k = contact_points(geom, i, j, nrm, sa, sb, kg, size, p_pos, p_depth, p_id, scr, iscr)
+            k = max(k, 0)
         s = count[C_NEW]
         count[C_NEW] += 1
         key_new[s] = key
@@ -218,22 +332,34 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
             wake_list[count[C_WAKE]] = j
             count[C_WAKE] += 1
         kept = 0
-        k = 0
         if g <= kg:
-            # 3. contact points on the plane (geom: this kernel's own argument, handed on as it came)
-            k = max(contact_points(geom, i, j, nrm, sa, sb, kg, size, p_pos, p_depth, p_id, scr, iscr), 0)
-            # plus the support points' midpoint when the plane's overlap sa - sb is not represented: when no point
-            # found reaches half of it (tip against tip, or a penetration through an edge that pierces a face,
-            # which the candidates do not include)
+            # 3. the contact points (above), plus the support points' midpoint when the plane's overlap sa - sb is
+            # not represented: when no point found reaches half of it (tip against tip, or a penetration through
+            # an edge that pierces a face, which the candidates do not include)
             maxd = 0.0
             for q in range(k):
                 if p_depth[q] > maxd:
                     maxd = p_depth[q]
             if sa - sb > 0.0 and maxd < 0.5 * (sa - sb) and k < MAXP:
-                p_depth[k] = sa - sb
+                # the deepest point where an edge of one block runs through the other: a point of the overlap
+                # whose depth changes with the blocks' relative velocity there; else the support points' own
+                # overlap at their midpoint (that depth changes with the support points' velocities, up to a
+                # block's width away, and the force at the midpoint does work its springs do not book)
+                d_a = _pierce_point(vert, fnw, fdw, he_origin, he_next, edge_he, es[i], es[i + 1], fs[j],
+                                    fs[j + 1], nrm, -1.0, 1e-9 * size, p_pos[k])
+                d_b = _pierce_point(vert, fnw, fdw, he_origin, he_next, edge_he, es[j], es[j + 1], fs[i],
+                                    fs[i + 1], nrm, 1.0, 1e-9 * size, scr[0])
                 p_id[k] = 0
-                for a in range(3):
-                    p_pos[k, a] = 0.5 * (vert[ia, a] + vert[ib, a])
+                if d_b > d_a:
+                    for a in range(3):
+                        p_pos[k, a] = scr[0, a]
+                    d_a = d_b
+                if d_a > 0.0:
+                    p_depth[k] = min(d_a, sa - sb)
+                else:
+                    p_depth[k] = sa - sb
+                    for a in range(3):
+                        p_pos[k, a] = 0.5 * (vert[ia, a] + vert[ib, a])
                 k += 1
         if k > 0:
             # 4. the contact law at each point
@@ -267,11 +393,15 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                         if pid_old[slot, r] == p_id[q]:
                             found = r
                             break
+                fd0, fd1, fd2 = 0.0, 0.0, 0.0  # the point's damping force last step
+                e_open = 0.0  # its normal spring's energy if it opens now (_book_opening)
                 if found >= 0:
                     matched[found] = True
                     us[0], us[1], us[2] = _onto_plane(us_old[slot, found, 0], us_old[slot, found, 1],
                                                       us_old[slot, found, 2], nrm[0], nrm[1], nrm[2])
                     bonded = bond_old[slot, found]
+                    fd0, fd1, fd2 = fd_old[slot, found, 0], fd_old[slot, found, 1], fd_old[slot, found, 2]
+                    e_open = 0.5 * fn_old[slot, found] * p_depth[q]
                 else:
                     us[0] = 0.0
                     us[1] = 0.0
@@ -284,7 +414,8 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                             found = 0
                     if found < 0:
                         bonded = first_step and (coh > 0.0 or ten > 0.0)
-                if p_depth[q] <= 0.0 and not bonded:
+                opens = p_depth[q] <= 0.0 and not bonded
+                if opens and found < 0:
                     continue
                 # velocity of B (= j) relative to A (= i) at the point (half-step velocities)
                 for a in range(3):
@@ -319,13 +450,27 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     vrel[0] -= c0
                     vrel[1] -= c1
                     vrel[2] -= c2
+                if opens:
+                    # last step's point opens; its springs' and damping force's second halves (see below)
+                    _book_opening(tally, e_open, kt, us, vrel, nrm, dt, fd0, fd1, fd2)
+                    continue
                 st, bonded, fn_el, ee, df, dd = point_force(kn, kt, tanphi, coh * apt, ten * apt, zeta, meff,
                                                             p_depth[q], nrm, vrel, dt, us, bonded, fpt)
                 tally[T_ELASTIC] += ee
                 tally[T_FRICTION] += df
-                tally[T_DAMPING] += dd
+                # the work of a force in the product-form kinetic energy takes the half-step velocities on both
+                # sides of its step, so each damping force is booked half with this step's velocity (dd / 2) and
+                # half with the next one's (last step's force here)
+                tally[T_DAMPING] += 0.5 * dd - 0.5 * dt * (fd0 * vrel[0] + fd1 * vrel[1] + fd2 * vrel[2])
                 if st == 0:
                     continue
+                if found < 0 and not first_step:
+                    # a new point: its normal spring holds 1/2 kn d^2 but took the work of half its force over this
+                    # step's approach (d - d_before) only, the product-form pairing: the difference 1/2 fn d_before,
+                    # d_before = d + vn dt, is booked as point turnover (created); for a natural first touch d_before
+                    # <= 0, for a point that the contact polygon's change made (already deep) about 1/2 kn d^2
+                    vn = vrel[0] * nrm[0] + vrel[1] * nrm[1] + vrel[2] * nrm[2]
+                    tally[T_TURNOVER] -= 0.5 * fn_el * (p_depth[q] + vn * dt)
                 if st == 2:
                     count[C_SLIDING] += 1
                 if p_depth[q] > tally[T_MAXDEPTH]:
@@ -354,18 +499,29 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     quat_matrix(quat[j], R)
                     body_point(j, p_pos[q], pos, R, strain, X)
                     add_strain_force(j, X, R, fpt, 1.0, qs)
+                # this step's damping force at the point: the force less its springs' parts
+                fd_new[s, kept, 0] = fpt[0] - fn_el * nrm[0] + kt * us[0]
+                fd_new[s, kept, 1] = fpt[1] - fn_el * nrm[1] + kt * us[1]
+                fd_new[s, kept, 2] = fpt[2] - fn_el * nrm[2] + kt * us[2]
                 _store_point(pid_new, us_new, state_new, bond_new, pos_new, fn_new, depth_new, s, kept, us, st,
                              bonded, fn_el, p_pos, p_depth, p_id, q)
                 kept += 1
         npt_new[s] = kept
         count[C_POINTS] += kept
-        # shear-spring energy of last step's points of this pair that have no successor (they opened)
+        # last step's points of this pair that have no successor: they opened, or the contact polygon changed
         if slot >= 0:
-            e = 0.0
             for r in range(npt_old[slot]):
                 if not matched[r]:
-                    e += 0.5 * ks * (us_old[slot, r, 0] ** 2 + us_old[slot, r, 1] ** 2 + us_old[slot, r, 2] ** 2)
-            tally[T_FRICTION] += e
+                    _book_vanished(tally, i, j, fixed[i], static[j], pos_old[slot, r], depth_old[slot, r],
+                                   fn_old[slot, r], us_old[slot, r], fd_old[slot, r], ks, nrm, dt, blocks)
+        elif not first_step:
+            # last step's pair of the blocks with their roles swapped (one fell asleep or woke): its points
+            # vanish as this pair's appear (they are booked as created)
+            sw = _find_slot(j * nbody + i, hmask, htab, key_old)
+            if sw >= 0:
+                for r in range(npt_old[sw]):
+                    _book_vanished(tally, j, i, static[j], fixed[i], pos_old[sw, r], depth_old[sw, r],
+                                   fn_old[sw, r], us_old[sw, r], fd_old[sw, r], ks, nrm_old[sw], dt, blocks)
         if sleep_on and kept > 0:
             moving_i = kin[i] or calm[i] < n_calm
             if not asleep[j]:
@@ -407,6 +563,7 @@ def carry_resting(law, material, asleep, con, static, tally, count):
             for a in range(3):
                 con.us[new, s, q, a] = con.us[old, s0, q, a]
                 con.pos[new, s, q, a] = con.pos[old, s0, q, a]
+                con.fd[new, s, q, a] = con.fd[old, s0, q, a]
                 u2 += con.us[old, s0, q, a] ** 2
             if kinds:  # the point's own kn (its kind's row): fn = kn depth
                 tally[T_ELASTIC] += 0.5 * con.fn[old, s0, q] * d0

@@ -35,7 +35,7 @@ Sleep = namedtuple("Sleep", "movable asleep calm pe_sl par")
 # contact history, two buffers (cur[0] the current one): per pair key, blocks a and b, common-plane normal,
 # point count; per point feature id, shear displacement, state, bond, position, elastic normal force, depth;
 # the hash table on the pair key
-Contacts = namedtuple("Contacts", "cur n_pair key a b nrm npt pid us state bond pos fn depth htab")
+Contacts = namedtuple("Contacts", "cur n_pair key a b nrm npt pid us state bond pos fn depth fd htab")
 # contact-law table lawtab[material a, material b, LAW_*] and the gap within which bonded contacts are kept; the
 # face kinds of a cut block model (dda/_kinds.py: per face its law row, where the row holds, the disc or triangle;
 # the intact-rock row; empty arrays: the materials decide)
@@ -57,9 +57,11 @@ Work = namedtuple("Work", "R w_old w_new Lnew qh nrm fpt vrel us p_pos p_depth p
 LAW_KN, LAW_KS, LAW_TANPHI, LAW_COH, LAW_TEN, LAW_ZETA = 0, 1, 2, 3, 4, 5
 NLAW = 6
 
-# energy columns: kinetic, potential, elastic, and the cumulative friction, contact damping, local damping
-E_KIN, E_POT, E_ELASTIC, E_FRICTION, E_DAMPING, E_LOCAL = 0, 1, 2, 3, 4, 5
-NENERGY = 6
+# energy columns: kinetic, potential, elastic, and the cumulative friction, contact damping, local damping and
+# point turnover (the spring energy of contact points that the contact geometry created or dropped while loaded:
+# released minus created; dda/_narrow.py)
+E_KIN, E_POT, E_ELASTIC, E_FRICTION, E_DAMPING, E_LOCAL, E_TURNOVER = 0, 1, 2, 3, 4, 5, 6
+NENERGY = 7
 # acc slots
 ACC_DRIVER, ACC_SLEEPING = 0, 1
 
@@ -79,7 +81,7 @@ NSTATS = 12
 
 # slots of one step's running sums (run_chunk's `tally`, float) and counters (`count`, integer; FIT and SAT add up
 # over the chunk)
-T_ELASTIC, T_FRICTION, T_DAMPING, T_LOCAL, T_KIN, T_POT, T_MAXDEPTH = 0, 1, 2, 3, 4, 5, 6
-NTALLY = 7
+T_ELASTIC, T_FRICTION, T_DAMPING, T_LOCAL, T_KIN, T_POT, T_MAXDEPTH, T_TURNOVER = 0, 1, 2, 3, 4, 5, 6, 7
+NTALLY = 8
 C_NEW, C_WAKE, C_CONTACTS, C_POINTS, C_SLIDING, C_SAT, C_FIT = 0, 1, 2, 3, 4, 5, 6
 NCOUNT = 7

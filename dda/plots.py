@@ -12,7 +12,8 @@ from .results import ENERGY_COLUMNS
 
 ENERGY_LABELS = {"kinetic": "kinetic", "potential": "potential (change from start)", "elastic": "elastic (springs)",
                  "friction": "friction (dissipated)", "damping": "contact damping (dissipated)",
-                 "local_damping": "local damping (dissipated)", "balance_error": "balance error"}
+                 "local_damping": "local damping (dissipated)",
+                 "point_turnover": "point turnover (released - created)", "balance_error": "balance error"}
 
 
 def _moves(pos, vel, moving):

@@ -1,7 +1,7 @@
 """Results of a DDA run: time series of the block states and the energy balance, and their files.
 
 ``series.npz`` keys: ``time`` (r,), ``pos`` (r, n, 3) centroids, ``quat`` (r, n, 4) orientations (w, x, y, z,
-body principal frame -> world), ``vel`` (r, n, 3), ``energy`` (r, 7) with columns ``ENERGY_COLUMNS``,
+body principal frame -> world), ``vel`` (r, n, 3), ``energy`` (r, 8) with columns ``ENERGY_COLUMNS``,
 ``contacts`` / ``points`` / ``sliding`` (r,) counts, ``names`` (n,), ``fixed`` (n,), ``mass`` (n,); with
 deformable blocks also ``strain`` (r, n, 6) body-frame strains (ex, ey, ez, gyz, gzx, gxy).
 ``series.csv``: one row per record with time, the energy columns, the counts, and the mean displacement of
@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-ENERGY_COLUMNS = ("kinetic", "potential", "elastic", "friction", "damping", "local_damping", "balance_error")
+ENERGY_COLUMNS = ("kinetic", "potential", "elastic", "friction", "damping", "local_damping", "point_turnover",
+                  "balance_error")
 # series.csv: the unit of each column as a suffix of its name (counts have none)
 CSV_UNITS = {"time": "s", **{c: "J" for c in ENERGY_COLUMNS}, "mean_displacement": "m",
              "mean_block_displacement": "m"}

@@ -71,8 +71,8 @@ from sgim.portable import matmul
 
 from . import _spheres as _sp
 from ._bondlaw import build_bond_hash
-from ._sphere_state import (B_FN, NBOND_COLS, ST_NEED_PAIRS, Bonds, Books, Env, History, Joints, Link, Motion,
-                            PairList, Spheres, Walls)
+from ._sphere_state import (B_FN, NBOND_COLS, NENERGY, ST_NEED_PAIRS, Bonds, Books, Env, History, Joints, Link,
+                            Motion, PairList, Spheres, Walls)
 from .progress import tracker
 from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
 from .polyhedra import check_convex, face_planes, half_edges
@@ -411,7 +411,7 @@ class SphereSimulation:
         self.nl_flag = np.ones(1, np.int64)
         self.x_ref = self.x.copy()
         self._alloc(max(64, 8 * n))
-        self.energy = np.zeros(6)
+        self.energy = np.zeros(NENERGY)
         self.acc = np.zeros(1)
         self.stats = np.zeros(8)
 
