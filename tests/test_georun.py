@@ -2,6 +2,9 @@
 
 - planar sliding: a slope (a triangulated ground surface) cut by one daylighting disc larger than the slope slides
   at a joint friction 0.5 % below the joint's dip and holds at 0.5 % above it (limit equilibrium: tan phi = tan psi);
+- wedge sliding: a slope (face 65/065, horizontal top) cut by two joint discs through the toe of the `wedge`
+  generator's wedge gives the generator's wedge (volume within 1e-9), and `dda wedge`'s search on the joints'
+  friction finds the critical angle and the factor of safety within 0.5 % of Hoek & Bray's (dda/hoekbray.py);
 - a crown key block that widens downward (two joint discs over a box cavity) falls at g (z = z0 - g t^2 / 2
   within 1 %), its inverted twin stays; the key block of cases/scenes/tunnel_blocks.toml (a horseshoe tunnel,
   two joint discs and a cross-joint set) has the wedge's volume in closed form, falls at g, and the rock around
@@ -13,6 +16,7 @@
   [blocks.run] duration is refused in one line naming the key; a run past the step limit is refused naming the
   [blocks] / [blocks.run] / [[blocks.law]] key that caused it.
 """
+import copy
 import json
 import math
 import subprocess
@@ -22,8 +26,11 @@ import numpy as np
 import pytest
 
 from cases import SCENES
-from dda.geoblocks import INTACT, build_blocks
+from dda import generate, hoekbray, shapes
+from dda._state import LAW_TANPHI
+from dda.geoblocks import INTACT, JOINT, build_blocks
 from dda.georun import geo_scene
+from dda.wedge import bracket_and_bisect
 from sgim.scene import load_scene, scene_from_dict
 from engine_runs import require_engine
 
@@ -49,15 +56,20 @@ def slope_data(phi, radius=60.0, centre=None, **blocks):
             "blocks": bl}
 
 
-def free_run(data, free_of, t1, t2):
-    """Run the scene's block model with only the blocks free_of(model) free; the free block's displacement at
-    t1 and the further displacement from t1 to t1 + t2."""
+def free_sim(data, free_of):
+    """The scene's block model and its Simulation with only the blocks free_of(model) free: (model, block
+    system, simulation, index of the first free block)."""
     scene = scene_from_dict(data, "test.toml")
     model = build_blocks(scene)
     free = free_of(model)
-    gs = geo_scene(scene, model=model, fixed=~free)
-    _, sim = gs.build()
-    i = int(np.nonzero(free)[0][0])
+    bs, sim = geo_scene(scene, model=model, fixed=~free).build()
+    return model, bs, sim, int(np.nonzero(free)[0][0])
+
+
+def free_run(data, free_of, t1, t2):
+    """Run the scene's block model with only the blocks free_of(model) free; the free block's displacement at
+    t1 and the further displacement from t1 to t1 + t2."""
+    _, _, sim, i = free_sim(data, free_of)
     sim.run(t1)
     d1 = sim.pos[i] - sim.pos0[i]
     sim.run(t2)
@@ -76,6 +88,122 @@ def test_planar_sliding_onset_at_the_joint_dip(ratio, slides):
     # sliding with local damping 0.8: a = 0.2 g (sin psi - cos psi tan phi) gives about 1e-3 m in the second half
     # second; held, the block does not move at all once the first loading has settled
     assert (moved > 3e-4) == slides, moved
+
+
+HB = hoekbray.PAPER_CASE  # the `wedge` generator's wedge: joints A 45/005, B 55/135, face 65/065, top 10 m up
+
+
+def wedge_data(settle_friction=45.0, margin=4.0, radius=60.0):
+    """The `wedge` generator's wedge as an sgim scene: a box `margin` beyond the wedge (toe at the origin), the
+    slope surface (the face plane 65/065 up to the crest line, the horizontal top behind it: one plan rectangle
+    wider than the box split along the crest, so that the surface has no edge inside the box) and the two joints
+    as discs of radius `radius` centred on the toe, at `settle_friction`."""
+    a, b, f, t, dt, verts = hoekbray.wedge_geometry(HB["joint_a"], HB["joint_b"], HB["face"], None, HB["height"])
+    lo, hi = verts.min(0) - margin, verts.max(0) + margin
+    x0, y0 = lo[:2] - 2 * margin
+    x1, y1 = hi[:2] + 2 * margin
+
+    def over_top(p):  # height of the face plane above the top at plan point p
+        return -(f[0] * p[0] + f[1] * p[1]) / f[2] - dt
+
+    rect = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    face, top = [], []
+    for k, p in enumerate(rect):
+        q = rect[(k + 1) % 4]
+        (top if over_top(p) >= 0 else face).append(p)
+        if over_top(p) * over_top(q) < 0:  # the crest line crosses this side: a corner of both polygons
+            s = over_top(p) / (over_top(p) - over_top(q))
+            c = (p[0] + s * (q[0] - p[0]), p[1] + s * (q[1] - p[1]))
+            face.append(c)
+            top.append(c)
+    vertices, faces, index = [], [], {}
+    for poly in (face, top):
+        ids = []
+        for p in poly:
+            if p not in index:  # the crest's two ends shared by both polygons: one surface, no edge at the crest
+                index[p] = len(vertices)
+                vertices.append([p[0], p[1], dt + min(0.0, over_top(p))])
+            ids.append(index[p])
+        faces += [[ids[0], ids[j], ids[j + 1]] for j in range(1, len(ids) - 1)]
+    discs = [{"name": n, "centre": [0.0, 0.0, 0.0], "dip": d[0], "dip_direction": d[1], "radius": radius}
+             for n, d in (("A", HB["joint_a"]), ("B", HB["joint_b"]))]
+    return {"domain": {"min": lo.tolist(), "max": hi.tolist()}, "packing": {"kind": "cubic", "radius": 0.5},
+            "excavation": [{"name": "slope", "vertices": vertices, "faces": faces}], "discontinuity": discs,
+            "blocks": {"kn": 1e10, "damping": 0.1, "friction": 60.0, "joint_friction": settle_friction,
+                       "run": {"duration": 1.0, "sleep": False, "local_damping": 0.8}}}
+
+
+def above_discs(model, names=("A", "B")):
+    """The blocks whose centroid lies above the plane of every disc in `names` (on its upward normal's side)."""
+    c = np.array([blk.volume_centroid()[1] for blk in model.blocks])
+    out = np.ones(len(c), bool)
+    for s in model.sources:
+        if s.shape == "disc" and s.name in names:
+            out &= ((c - s.centre) @ s.normal) * np.sign(s.normal[2]) > 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def wedge_slope():
+    """The wedge scene cut (one block above both joints: the wedge, the only free block) and settled for 0.5 s
+    with its joints at 45 degrees."""
+    model, bs, sim, i = free_sim(wedge_data(), above_discs)
+    sim.run(0.5)
+    return model, bs, sim, i
+
+
+def test_wedge_of_two_joint_discs_is_the_wedge_generators(wedge_slope):
+    """The block above both joint discs is the generator's wedge: its volume (Hoek & Bray's tetrahedron and the
+    generator's block) within 1e-9, its four corners those of the generator's within 1e-9 of its size, its faces
+    the two discs and the slope surface, and every corner of its joint faces inside its disc (a joint face
+    throughout, no intact rock to hold it: brute force against the disc radius)."""
+    model, _, _, i = wedge_slope
+    assert above_discs(model).sum() == 1
+    hb = hoekbray.wedge_fs(**HB)
+    gen = generate.wedge(joint_a=HB["joint_a"], joint_b=HB["joint_b"], face=HB["face"], height=HB["height"])[0]
+    blk = model.blocks[i]
+    assert blk.volume() == pytest.approx(hb.volume, rel=1e-9)
+    assert blk.volume() == pytest.approx(shapes.volume(gen), rel=1e-9)
+    dist = np.linalg.norm(blk.v[:, None] - gen.vertices[None], axis=2)  # every corner near one of the other's
+    size = np.ptp(gen.vertices, axis=0).max()
+    assert len(gen.vertices) == 4 and dist.min(0).max() < 1e-9 * size and dist.min(1).max() < 1e-9 * size
+    names = sorted(model.sources[s].name for s in blk.src)
+    assert names == ["A", "B", "slope", "slope"], names
+    for k, s in enumerate(blk.src):
+        if model.sources[s].shape == "disc":
+            corners = blk.v[blk.faces[k]]
+            assert (model.point_kinds(i, k, corners) == JOINT).all()
+
+
+def test_wedge_critical_friction_within_half_a_percent_of_hoek_bray(wedge_slope):
+    """From the settled wedge, each trial lowers the joints' law (law:A, law:B; the blocks' own friction stays
+    60 degrees) to its angle and runs 1 s: the wedge slides when its advance along the line of intersection
+    in the last quarter second is above 1e-7 m and above that of the quarter before (it accelerates; a wedge that
+    holds comes to rest after its elastic slip). The search of `dda wedge` (from 25 degrees down in steps of 2,
+    then bisection to 0.02 degrees) finds the critical angle within 0.5 % of Hoek & Bray's (both planes in
+    contact, c = 0: tan phi_c = 1 / (A + B)), and the factor of safety at 25 degrees within 0.5 % of theirs."""
+    _, bs, settled, i = wedge_slope
+    hb = hoekbray.wedge_fs(**HB)
+    o, p5 = hb.vertices[:2]
+    line = (o - p5) / np.linalg.norm(o - p5)
+    rows = [bs.materials.index(f"law:{n}") for n in ("A", "B")]
+
+    def slides(phi):
+        sim = copy.deepcopy(settled)
+        for r in rows:
+            sim.lawtab[r, r, LAW_TANPHI] = math.tan(math.radians(phi))
+        p0, marks = sim.pos[i].copy(), []
+        for t in (0.5, 0.25, 0.25):
+            sim.run(t)
+            marks.append(float((sim.pos[i] - p0) @ line))
+        last, before = marks[2] - marks[1], marks[1] - marks[0]
+        return last > 1e-7 and last > before
+
+    phi_c, trials = bracket_and_bisect(slides, HB["friction"], step=2.0, tol=0.02)
+    assert trials[0] == (HB["friction"], False) and any(s for _, s in trials), trials
+    assert phi_c == pytest.approx(hb.critical_friction, rel=0.005), trials
+    fs = math.tan(math.radians(HB["friction"])) / math.tan(math.radians(phi_c))
+    assert fs == pytest.approx(hb.fs, rel=0.005), (fs, hb.fs)
 
 
 def key_block_data(widens_down):
