@@ -21,6 +21,7 @@ import json
 import math
 import subprocess
 import sys
+import tomllib
 
 import numpy as np
 import pytest
@@ -93,44 +94,14 @@ def test_planar_sliding_onset_at_the_joint_dip(ratio, slides):
 HB = hoekbray.PAPER_CASE  # the `wedge` generator's wedge: joints A 45/005, B 55/135, face 65/065, top 10 m up
 
 
-def wedge_data(settle_friction=45.0, margin=4.0, radius=60.0):
-    """The `wedge` generator's wedge as an sgim scene: a box `margin` beyond the wedge (toe at the origin), the
-    slope surface (the face plane 65/065 up to the crest line, the horizontal top behind it: one plan rectangle
-    wider than the box split along the crest, so that the surface has no edge inside the box) and the two joints
-    as discs of radius `radius` centred on the toe, at `settle_friction`."""
-    a, b, f, t, dt, verts = hoekbray.wedge_geometry(HB["joint_a"], HB["joint_b"], HB["face"], None, HB["height"])
-    lo, hi = verts.min(0) - margin, verts.max(0) + margin
-    x0, y0 = lo[:2] - 2 * margin
-    x1, y1 = hi[:2] + 2 * margin
-
-    def over_top(p):  # height of the face plane above the top at plan point p
-        return -(f[0] * p[0] + f[1] * p[1]) / f[2] - dt
-
-    rect = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
-    face, top = [], []
-    for k, p in enumerate(rect):
-        q = rect[(k + 1) % 4]
-        (top if over_top(p) >= 0 else face).append(p)
-        if over_top(p) * over_top(q) < 0:  # the crest line crosses this side: a corner of both polygons
-            s = over_top(p) / (over_top(p) - over_top(q))
-            c = (p[0] + s * (q[0] - p[0]), p[1] + s * (q[1] - p[1]))
-            face.append(c)
-            top.append(c)
-    vertices, faces, index = [], [], {}
-    for poly in (face, top):
-        ids = []
-        for p in poly:
-            if p not in index:  # the crest's two ends shared by both polygons: one surface, no edge at the crest
-                index[p] = len(vertices)
-                vertices.append([p[0], p[1], dt + min(0.0, over_top(p))])
-            ids.append(index[p])
-        faces += [[ids[0], ids[j], ids[j + 1]] for j in range(1, len(ids) - 1)]
-    discs = [{"name": n, "centre": [0.0, 0.0, 0.0], "dip": d[0], "dip_direction": d[1], "radius": radius}
-             for n, d in (("A", HB["joint_a"]), ("B", HB["joint_b"]))]
-    return {"domain": {"min": lo.tolist(), "max": hi.tolist()}, "packing": {"kind": "cubic", "radius": 0.5},
-            "excavation": [{"name": "slope", "vertices": vertices, "faces": faces}], "discontinuity": discs,
-            "blocks": {"kn": 1e10, "damping": 0.1, "friction": 60.0, "joint_friction": settle_friction,
-                       "run": {"duration": 1.0, "sleep": False, "local_damping": 0.8}}}
+def wedge_data(settle_friction=45.0):
+    """cases/scenes/wedge_blocks.toml (the `wedge` generator's wedge: the slope face 65/065 and its horizontal top
+    10 m up as one triangulated excavation, the joints as two discs of radius 60 m through the toe) with its joints
+    at `settle_friction`, run with local damping 0.8 and no sleeping."""
+    data = tomllib.loads((SCENES / "wedge_blocks.toml").read_text())
+    data["blocks"]["joint_friction"] = settle_friction
+    data["blocks"]["run"].update({"sleep": False, "local_damping": 0.8})
+    return data
 
 
 def above_discs(model, names=("A", "B")):
@@ -204,6 +175,22 @@ def test_wedge_critical_friction_within_half_a_percent_of_hoek_bray(wedge_slope)
     assert phi_c == pytest.approx(hb.critical_friction, rel=0.005), trials
     fs = math.tan(math.radians(HB["friction"])) / math.tan(math.radians(phi_c))
     assert fs == pytest.approx(hb.fs, rel=0.005), (fs, hb.fs)
+
+
+def test_wedge_blocks_scene_holds_at_its_joint_friction():
+    """cases/scenes/wedge_blocks.toml run as the scene says: its boundary fixes the three blocks of rock and
+    leaves the wedge free, which holds at the scene's 25 degrees (Hoek & Bray: FS 1.30): in the second half of
+    its 1 s it moves less than a micrometre (its elastic settling in the first half: below a millimetre)."""
+    scene = load_scene(SCENES / "wedge_blocks.toml")
+    model = build_blocks(scene)
+    _, sim = geo_scene(scene, model=model).build()
+    free = ~np.asarray(sim.A.fixed, bool)
+    np.testing.assert_array_equal(free, above_discs(model))
+    assert scene.blocks.joint.friction == HB["friction"]
+    sim.run(0.5 * scene.blocks.run["duration"])
+    d1 = sim.pos[free] - sim.pos0[free]
+    sim.run(0.5 * scene.blocks.run["duration"])
+    assert np.linalg.norm(d1) < 1e-3 and np.linalg.norm(sim.pos[free] - sim.pos0[free] - d1) < 1e-6, d1
 
 
 def key_block_data(widens_down):
