@@ -148,7 +148,7 @@ def test_wedge_of_two_joint_discs_is_the_wedge_generators(wedge_slope):
 
 def test_wedge_critical_friction_within_half_a_percent_of_hoek_bray(wedge_slope):
     """From the settled wedge, each trial lowers the joints' law (law:A, law:B; the blocks' own friction stays
-    60 degrees) to its angle and runs 1 s: the wedge slides when its advance along the line of intersection
+    at the scene's 40 degrees) to its angle and runs 1 s: the wedge slides when its advance along the line of intersection
     in the last quarter second is above 1e-7 m and above that of the quarter before (it accelerates; a wedge that
     holds comes to rest after its elastic slip). The search of `dda wedge` (from 25 degrees down in steps of 2,
     then bisection to 0.02 degrees) finds the critical angle within 0.5 % of Hoek & Bray's (both planes in
