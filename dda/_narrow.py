@@ -333,9 +333,9 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
             count[C_WAKE] += 1
         kept = 0
         if g <= kg:
-            # 3. the contact points (above), plus the support points' midpoint when the plane's overlap sa - sb is
-            # not represented: when no point found reaches half of it (tip against tip, or a penetration through
-            # an edge that pierces a face, which the candidates do not include)
+            # 3. the contact points (above), plus one more when the plane's overlap sa - sb is not represented: when
+            # no point found reaches half of it (tip against tip, or an edge that pierces a face, which the
+            # candidates do not include)
             maxd = 0.0
             for q in range(k):
                 if p_depth[q] > maxd:
