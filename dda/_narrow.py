@@ -40,21 +40,20 @@ from ._state import (C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAK
 
 
 @njit(cache=True, inline="always")
-def _book_opening(tally, e_n, kt, us, vrel, nrm, dt, fd0, fd1, fd2):
-    """The energy of a point that opens this step (depth <= 0, no bond): its normal spring's state 1/2 fn d_last
-    goes with the half of its last force that the product-form kinetic energy pairs with this step's increment,
-    together 1/2 fn d_now = e_n (point turnover, released; <= 0); likewise its shear spring's 1/2 ks u.(u + du)
-    (released with friction, du = the tangential increment of this step), and the second half of its last damping
-    force (contact damping)."""
-    vn = vrel[0] * nrm[0] + vrel[1] * nrm[1] + vrel[2] * nrm[2]
-    us_du = 0.0
-    uu = 0.0
-    for a in range(3):
-        us_du += us[a] * (vrel[a] - vn * nrm[a]) * dt
-        uu += us[a] * us[a]
+def _book_gone(tally, e_n, kt, us, v0, v1, v2, nrm, dt, fd0, fd1, fd2):
+    """The energy of last step's point that is gone this step (found open: depth <= 0 and no bond; or without a
+    successor), v its relative velocity this step: its normal spring's state 1/2 fn d_last goes with the half of
+    its last force that the product-form kinetic energy pairs with this step's increment, together
+    1/2 fn d_now = e_n (point turnover, released; <= 0 for a point that opened); likewise its shear spring's
+    1/2 ks u.(u + du) (released with friction, du = the tangential increment of this step), and the second half
+    of its last damping force fd (contact damping)."""
+    vn = v0 * nrm[0] + v1 * nrm[1] + v2 * nrm[2]
+    us_du = (us[0] * (v0 - vn * nrm[0]) * dt + us[1] * (v1 - vn * nrm[1]) * dt
+             + us[2] * (v2 - vn * nrm[2]) * dt)
+    uu = us[0] * us[0] + us[1] * us[1] + us[2] * us[2]
     tally[T_TURNOVER] += e_n
     tally[T_FRICTION] += 0.5 * kt * (uu + us_du)
-    tally[T_DAMPING] -= 0.5 * dt * (fd0 * vrel[0] + fd1 * vrel[1] + fd2 * vrel[2])
+    tally[T_DAMPING] -= 0.5 * dt * (fd0 * v0 + fd1 * v1 + fd2 * v2)
 
 
 @njit(cache=True)
@@ -75,18 +74,14 @@ def _body_point_velocity(b, still, x, blocks):
 @njit(cache=True)
 def _book_vanished(tally, i, j, still_i, still_j, x, depth, fn, u, fd, ks, nrm, dt, blocks):
     """The energy of last step's point (at x, depth, normal force fn, shear displacement u, damping force fd)
-    that has no successor this step, as _book_opening does for a point found open: 1/2 fn d_after (point turnover,
-    released; d_after = depth - vn dt from the blocks' velocities at x: <= 0 for a point that opened, about
-    1/2 kn depth^2 for one that a change of the contact polygon dropped while loaded), 1/2 ks u.(u + du)
-    (friction), the second half of its damping force."""
+    that has no successor this step (_book_gone), its depth now d_after = depth - vn dt from the blocks'
+    velocities at x: 1/2 fn d_after is <= 0 for a point that opened, about 1/2 kn depth^2 for one that a change
+    of the contact polygon dropped while loaded."""
     a0, a1, a2 = _body_point_velocity(i, still_i, x, blocks)
     b0, b1, b2 = _body_point_velocity(j, still_j, x, blocks)
     v0, v1, v2 = b0 - a0, b1 - a1, b2 - a2
     vn = v0 * nrm[0] + v1 * nrm[1] + v2 * nrm[2]
-    du0, du1, du2 = (v0 - vn * nrm[0]) * dt, (v1 - vn * nrm[1]) * dt, (v2 - vn * nrm[2]) * dt
-    tally[T_TURNOVER] += 0.5 * fn * (depth - vn * dt)
-    tally[T_FRICTION] += 0.5 * ks * (u[0] * (u[0] + du0) + u[1] * (u[1] + du1) + u[2] * (u[2] + du2))
-    tally[T_DAMPING] -= 0.5 * dt * (fd[0] * v0 + fd[1] * v1 + fd[2] * v2)
+    _book_gone(tally, 0.5 * fn * (depth - vn * dt), ks, u, v0, v1, v2, nrm, dt, fd[0], fd[1], fd[2])
 
 
 @njit(cache=True)
@@ -336,11 +331,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
             # 3. the contact points (above), plus one more when the plane's overlap sa - sb is not represented: when
             # no point found reaches half of it (tip against tip, or an edge that pierces a face, which the
             # candidates do not include)
-            maxd = 0.0
-            for q in range(k):
-                if p_depth[q] > maxd:
-                    maxd = p_depth[q]
-            if sa - sb > 0.0 and maxd < 0.5 * (sa - sb) and k < MAXP:
+            if sa - sb > 0.0 and _unshown(p_depth, k, sb - sa) and k < MAXP:
                 # the deepest point where an edge of one block runs through the other: a point of the overlap
                 # whose depth changes with the blocks' relative velocity there; else the support points' own
                 # overlap at their midpoint (that depth changes with the support points' velocities, up to a
@@ -394,7 +385,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                             found = r
                             break
                 fd0, fd1, fd2 = 0.0, 0.0, 0.0  # the point's damping force last step
-                e_open = 0.0  # its normal spring's energy if it opens now (_book_opening)
+                e_open = 0.0  # its normal spring's energy if it opens now (_book_gone)
                 if found >= 0:
                     matched[found] = True
                     us[0], us[1], us[2] = _onto_plane(us_old[slot, found, 0], us_old[slot, found, 1],
@@ -452,7 +443,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     vrel[2] -= c2
                 if opens:
                     # last step's point opens; its springs' and damping force's second halves (see below)
-                    _book_opening(tally, e_open, kt, us, vrel, nrm, dt, fd0, fd1, fd2)
+                    _book_gone(tally, e_open, kt, us, vrel[0], vrel[1], vrel[2], nrm, dt, fd0, fd1, fd2)
                     continue
                 st, bonded, fn_el, ee, df, dd = point_force(kn, kt, tanphi, coh * apt, ten * apt, zeta, meff,
                                                             p_depth[q], nrm, vrel, dt, us, bonded, fpt)

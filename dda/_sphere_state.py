@@ -44,10 +44,9 @@ Books = namedtuple("Books", "energy acc stats")
 
 # columns of a contact-law row (ContactLaw.row: the block engine's order)
 LAW_KN, LAW_KS, LAW_TANPHI, LAW_COH, LAW_TEN, LAW_ZETA = 0, 1, 2, 3, 4, 5
-# energy columns: kinetic, potential, elastic, and the cumulative friction, contact damping, local damping and
-# the block engine's point turnover (always 0 for spheres)
+# energy columns: kinetic, potential, elastic, and the cumulative friction, contact damping, local damping (the
+# block engine's columns, dda/_state.py: its NENERGY, with its point turnover 0 for spheres)
 E_KIN, E_POT, E_ELASTIC, E_FRICTION, E_DAMPING, E_LOCAL = 0, 1, 2, 3, 4, 5
-NENERGY = 7
 # slots of the per-step energy sums res: elastic, friction (and released), damping; bond energy (coupled runs)
 R_ELASTIC, R_FRICTION, R_DAMPING, R_BOND = 0, 1, 2, 3
 

@@ -71,8 +71,9 @@ from sgim.portable import matmul
 
 from . import _spheres as _sp
 from ._bondlaw import build_bond_hash
-from ._sphere_state import (B_FN, NBOND_COLS, NENERGY, ST_NEED_PAIRS, Bonds, Books, Env, History, Joints, Link,
-                            Motion, PairList, Spheres, Walls)
+from ._sphere_state import (B_FN, NBOND_COLS, ST_NEED_PAIRS, Bonds, Books, Env, History, Joints, Link, Motion,
+                            PairList, Spheres, Walls)
+from ._state import NENERGY  # the block engine's energy columns (coupled runs add the two)
 from .progress import tracker
 from .results import ENERGY_COLUMNS  # one column order for blocks and spheres
 from .polyhedra import check_convex, face_planes, half_edges
