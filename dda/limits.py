@@ -44,12 +44,10 @@ def limit_for(scene=None, max_steps=None):
 
 
 def block_dt_source(scene):
-    """(key, value) of the stiffness that sets a block scene's critical step: the largest kn of [contact] and
-    the [[contact_pair]] laws, or of the scene's own ``stiffness_keys()`` (the block run of an sgim scene:
-    [blocks] kn and the [[blocks.law]] kn, dda/georun.py)."""
-    own = getattr(scene, "stiffness_keys", None)
-    pairs = own() if own is not None else [("contact.kn", float(scene.law.kn))] + [
-        (f"contact_pair[{k}].kn", float(law.kn)) for k, law in enumerate(scene.pair_laws.values())]
+    """(key, value) of the stiffness that sets a block scene's critical step: the largest of the scene's
+    ``stiffness_keys()`` ([contact] kn and the [[contact_pair]] laws; the block run of an sgim scene: [blocks] kn and
+    the [[blocks.law]] kn, dda/georun.py)."""
+    pairs = scene.stiffness_keys()
     key, kn = pairs[0]
     for k, v in pairs[1:]:
         if v > kn:
@@ -108,10 +106,10 @@ def check(path, duration, dt, *, dt_key, dt_value, auto_dt, dt_crit=None, safety
 
 def check_block_run(scene, sim, max_steps=None, duration=None):
     """The step check of a block scene's Simulation `sim` (DDAScene.build). A scene whose run settings live under
-    other keys (the block run of an sgim scene: [blocks.run]) names them in ``run_keys``: "duration", "dt" and
+    other keys (the block run of an sgim scene: [blocks.run]) names them in its ``run_keys``: "duration", "dt" and
     "raise_limit" (the remedy's wording for the step limit)."""
     duration = scene.duration if duration is None else duration
-    keys = getattr(scene, "run_keys", None) or {}
+    keys = scene.run_keys
     named = dict(duration_key=keys.get("duration", "simulation.duration"), raise_limit=keys.get("raise_limit"))
     if scene.dt is not None:
         return check(scene.path, duration, sim.dt, dt_key=keys.get("dt", "simulation.dt"), dt_value=scene.dt,

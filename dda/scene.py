@@ -177,6 +177,15 @@ class DDAScene:
     reports: list = field(default_factory=list)  # [[report]]: dda.answers.Report (empty: the default answers)
     viscous_damping: float | str = 0.0  # [simulation] viscous_damping: ratio of critical of the first mode, or
     # "critical" (sphere runs)
+    # the keys of the run settings that the step limit's message names (dda/limits.py check_block_run) where they
+    # are not [simulation]'s: "duration", "dt", and "raise_limit" (the remedy's wording); dda/georun.py's own
+    run_keys = {}
+
+    def stiffness_keys(self):
+        """[(key, kn)] of the block stiffnesses in the run: [contact] kn and each [[contact_pair]] kn (dda/limits.py
+        names the largest when it sets a time step past the step limit)."""
+        return [("contact.kn", float(self.law.kn))] + [
+            (f"contact_pair[{k}].kn", float(law.kn)) for k, law in enumerate(self.pair_laws.values())]
 
     def build_spheres(self, max_steps=None, duration=None):
         """SphereSet and SphereSimulation of a scene with [spheres] (its blocks are fixed walls).
