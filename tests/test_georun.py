@@ -2,6 +2,9 @@
 
 - planar sliding: a slope (a triangulated ground surface) cut by one daylighting disc larger than the slope slides
   at a joint friction 0.5 % below the joint's dip and holds at 0.5 % above it (limit equilibrium: tan phi = tan psi);
+- a rock bridge: the same slope, its joint a finite disc that leaves an intact bridge of area A_b (brute force
+  against the disc radius); loaded by gravity quasi-statically, the bisected critical bridge cohesion is within 2 %
+  of limit equilibrium's (W sin psi - W cos psi tan phi) / A_b;
 - wedge sliding: a slope (face 65/065, horizontal top) cut by two joint discs through the toe of the `wedge`
   generator's wedge gives the generator's wedge (volume within 1e-9), and `dda wedge`'s search on the joints'
   friction finds the critical angle and the factor of safety within 0.5 % of Hoek & Bray's (dda/hoekbray.py);
@@ -28,7 +31,7 @@ import pytest
 
 from cases import SCENES
 from dda import generate, hoekbray, shapes
-from dda._state import LAW_TANPHI
+from dda._state import LAW_COH, LAW_TANPHI
 from dda.geoblocks import INTACT, JOINT, build_blocks
 from dda.georun import geo_scene
 from dda.wedge import bracket_and_bisect
@@ -269,6 +272,96 @@ def test_tunnel_key_block_falls_from_the_crown_and_the_rock_around_it_stays(tunn
     d = sim.pos - sim.pos0
     assert_falls_at_g(d[key], sim.time)
     assert np.abs(d[free & ~key]).max() < 1e-3, d[free & ~key]
+
+
+def bridge_data(cohesion, phi=20.0, share=0.5, R=1000.0):
+    """slope_data with the joint a disc of radius R whose rim crosses the sliding block's joint face at `share` of
+    its length from the toe: the disc covers the down-dip part (joint), the up-dip part is a rock bridge (intact
+    rock with `cohesion`, no tensile strength; the intact rock's friction is the joint's, phi). Returns (data, disc
+    centre, in-plane unit vector down the dip)."""
+    zf = 16 - math.tan(math.radians(BETA)) * (XD - 12)
+    toe = np.array([XD, 2.0, zf])
+    top = np.array([XD - (16 - zf) / math.tan(math.radians(PSI)), 2.0, 16.0])
+    down = np.array([math.cos(math.radians(PSI)), 0.0, -math.sin(math.radians(PSI))])
+    centre = toe + share * (top - toe) + R * down
+    return slope_data(phi, radius=R, centre=centre.tolist(), cohesion=cohesion, tensile=0.0), centre, down
+
+
+def area_outside_disc(poly, normal, centre, R, n=2000):
+    """Brute force: the area of the planar convex polygon `poly` farther than R from `centre` (distances in the
+    plane of unit normal `normal`), counted on an n x n grid of cell centres over its bounding rectangle."""
+    e1 = poly[1] - poly[0]
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    uv = np.c_[(poly - poly[0]) @ e1, (poly - poly[0]) @ e2]
+    lo, hi = uv.min(0), uv.max(0)
+    h = (hi - lo) / n
+    u, v = np.meshgrid(lo[0] + h[0] * (np.arange(n) + 0.5), lo[1] + h[1] * (np.arange(n) + 0.5), indexing="ij")
+    inside = np.ones(u.shape, bool)
+    for k in range(len(uv)):  # left of every edge of the counter-clockwise loop (as seen along the normal)
+        a, b = uv[k - 1], uv[k]
+        inside &= (b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0]) >= 0.0
+    if not inside.any():  # the loop runs clockwise
+        inside = np.ones(u.shape, bool)
+        for k in range(len(uv)):
+            a, b = uv[k - 1], uv[k]
+            inside &= (b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0]) <= 0.0
+    p = poly[0] + u[..., None] * e1 + v[..., None] * e2 - centre
+    radial = p - (p @ normal)[..., None] * normal
+    outside = np.einsum("...i,...i->...", radial, radial) > R * R
+    return float((inside & outside).sum()) * h[0] * h[1]
+
+
+def test_rock_bridge_critical_cohesion_within_two_percent():
+    """The slope of the planar sliding test, its joint a finite disc that leaves the up-dip half of the sliding
+    block's base as a rock bridge of area A_b (brute force: the base polygon's area outside the disc radius).
+    Loaded by gravity quasi-statically (raised in 20 steps over 0.5 s with the bridge cemented at 10 times the
+    limit, then held 0.25 s: the joint part's points come to their friction limit, as limit equilibrium
+    assumes), then the bridge's cohesion is lowered to each trial value and the block runs 1 s. The bisected
+    critical cohesion (slides below, holds above) is within 2 % of limit equilibrium's
+    c = (W sin psi - W cos psi tan phi) / A_b (W from the block's volume and the scene's density)."""
+    phi = 20.0
+    sample, _, _ = bridge_data(1.0, phi)
+    scene = scene_from_dict(sample, "test.toml")
+    model = build_blocks(scene)
+    i = int(np.nonzero(above_joint(model))[0][0])
+    blk = model.blocks[i]
+    src = [model.sources[s] for s in blk.src]
+    j = [s.name for s in src].index("J")
+    disc = src[j]
+    poly = blk.v[list(blk.faces[j])]
+    a_b = area_outside_disc(poly, disc.normal, disc.centre, disc.radius)
+    area = 0.5 * np.linalg.norm(np.cross(poly[1:-1] - poly[0], poly[2:] - poly[0]).sum(0))
+    w = scene.blocks.density * G * blk.volume()
+    c_le = w * (math.sin(math.radians(PSI)) - math.cos(math.radians(PSI)) * math.tan(math.radians(phi))) / a_b
+    assert 0.4 < a_b / area < 0.6  # about half the base is bridge
+
+    data, _, down = bridge_data(10.0 * c_le, phi)
+    scene = scene_from_dict(data, "test.toml")
+    bs, settled = geo_scene(scene, model=build_blocks(scene), fixed=~above_joint(model)).build()
+    settled.blowup_ratio = math.inf  # the energy balance's reference is that of the first (lightest) gravity
+    g = settled.gravity.copy()
+    for k in range(1, 21):
+        settled.gravity[:] = g * k / 20
+        settled.run(0.025)
+    settled.run(0.25)
+    row = bs.materials.index("law:intact")
+
+    def slides(c):
+        sim = copy.deepcopy(settled)
+        sim.lawtab[row, row, LAW_COH] = c
+        p0 = sim.pos[i].copy()
+        sim.run(0.5)
+        d1 = sim.pos[i] - p0
+        sim.run(0.5)
+        return float((sim.pos[i] - p0 - d1) @ down) > 3e-4  # about 0.1 m in the second half when it slides
+
+    lo, hi = 0.0, 2.0 * c_le
+    assert slides(lo) and not slides(hi)
+    while hi - lo > 0.005 * c_le:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if slides(mid) else (lo, mid)
+    assert 0.5 * (lo + hi) == pytest.approx(c_le, rel=0.02), (lo / c_le, hi / c_le)
 
 
 def test_point_law_follows_the_face_kind():
