@@ -47,7 +47,7 @@ from sgim.geometry import dip_to_normal
 from .blockcut import (REL, TBlock, disc_reaches, fan, face_planes, plane_basis, section, signed, split,
                        triangle_reaches)
 from .blockspec import BlockSpec
-from .geoexcavate import CavityCut, Terrain, carve_block, excavate_block
+from .geoexcavate import CavityCut, Terrain, carve_block, excavate_block, label_walls
 
 KINDS = ("domain", "joint", "intact", "fault", "excavation")
 DOMAIN, JOINT, INTACT, FAULT, EXCAVATION = range(len(KINDS))
@@ -347,12 +347,14 @@ def _excavations(pool, scene, sources, stats):
         pool.replace(repl)
 
 
-def _cavities(pool, scene, sources, stats):
+def _cavities(pool, scene, sources, walls):
+    """Carve every cavity; (cavity, wall source, cap source) of each into ``walls`` for ``_cavity_walls``."""
     for cv in getattr(scene, "cavities", []):
         cav = CavityCut(cv.mesh, cv.name)
         sources.append(Source(cv.name, EXCAVATION, "surface"))
         sources.append(Source(f"{cv.name} (split)", INTACT, "surface"))
         wall, cut = len(sources) - 2, len(sources) - 1
+        walls.append((cav, wall, cut))
         repl = {}
         for i in np.nonzero(np.all(pool.lo <= cv.mesh.hi, axis=1) & np.all(pool.hi >= cv.mesh.lo, axis=1))[0]:
             b = pool.blocks[i]
@@ -503,13 +505,14 @@ def build_blocks(scene, progress=None) -> BlockModel:
     v = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
     sources = [Source("domain", DOMAIN, "box")]
     pool = _Pool([TBlock(v, [list(f) for f in BOX_FACES], [0] * 6)])
-    stats, times = {}, {}
+    stats, times, walls = {}, {}, []
     stages = (("joint sets", lambda: _fabric(pool, spec, sources, lo, hi, stats)),
               ("excavation", lambda: _excavations(pool, scene, sources, stats)),
-              ("cavities", lambda: _cavities(pool, scene, sources, stats)),
+              ("cavities", lambda: _cavities(pool, scene, sources, walls)),
               ("discs", lambda: _discs(pool, scene, spec, sources, stats, lo, hi)),
               ("surfaces", lambda: _surface_discontinuities(pool, scene, spec, sources, stats)),
-              ("slivers", lambda: _merge_slivers(pool, spec.min_volume, stats)))
+              ("slivers", lambda: _merge_slivers(pool, spec.min_volume, stats)),
+              ("cavity walls", lambda: [label_walls(pool.blocks, *w) for w in walls]))
     for name, run in stages:
         t0 = time.perf_counter()
         run()

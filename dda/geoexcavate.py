@@ -18,7 +18,8 @@ For a block P with plan footprint F (the convex hull of its vertices' (x, y)):
 Cavity (``[[cavity]]``, a closed triangulated surface): every facet whose triangle reaches a piece of the block
 (exact test in the facet's plane) splits that piece by its plane; the surface then crosses no piece's interior,
 so each piece lies wholly inside or outside and its centroid decides (``TriMesh.inside``). A block with no
-piece inside is kept whole; the caps between two kept pieces are intact rock, those on the wall free faces.
+piece inside is kept whole. Once the model is cut through, ``label_walls`` makes the caps wholly on the wall
+free faces; the others (between two kept pieces, or partly so) stay intact rock.
 """
 from __future__ import annotations
 
@@ -209,15 +210,31 @@ def carve_block(blk: TBlock, cav: CavityCut, wall_src, split_src):
     inside = np.asarray(cav.mesh.inside(cents), bool)
     if not inside.any():
         return [blk]
-    kept = [p for p, i in zip(pieces, inside) if not i]
-    for p in kept:  # caps on the wall are free faces, the others intact rock between two kept pieces
+    return [p for p, i in zip(pieces, inside) if not i]
+
+
+def label_walls(blocks, cav: CavityCut, wall_src, split_src):
+    """The caps (faces of source ``split_src``) of ``blocks`` that lie wholly on the cavity's wall get
+    ``wall_src`` (a free face); the others stay intact rock. Run once the model is cut through (a cap that the
+    discs cut later is judged by its own pieces): a cap is on the wall when the points just outside it (its
+    centre and its corners drawn 1 % towards the centre) all lie in the cavity; a cap with rock beyond a part of
+    it keeps the intact law there, where its contacts are."""
+    for p in blocks:
         idx = [k for k, s in enumerate(p.src) if s == split_src]
         if not idx:
             continue
+        if np.any(p.v.max(0) < cav.mesh.lo) or np.any(p.v.min(0) > cav.mesh.hi):
+            continue
         n, _ = face_planes(p)
-        probe = np.array([p.v[p.faces[k]].mean(0) for k in idx]) + 1e-6 * p.diag() * n[idx]
-        wall = np.asarray(cav.mesh.inside(probe), bool)
-        for k, w in zip(idx, wall):
-            if w:
+        probes, owner = [], []
+        for k in idx:
+            corners = p.v[p.faces[k]]
+            c = corners.mean(0)
+            pts = np.vstack([c, c + 0.99 * (corners - c)]) + 1e-6 * p.diag() * n[k]
+            probes.append(pts)
+            owner += [k] * len(pts)
+        inside = np.asarray(cav.mesh.inside(np.vstack(probes)), bool)
+        owner = np.asarray(owner)
+        for k in idx:
+            if inside[owner == k].all():
                 p.src[k] = wall_src
-    return kept

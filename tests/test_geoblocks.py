@@ -425,3 +425,36 @@ def test_dda_blocks_bad_cut_away_is_refused_before_cutting(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--cut-away = 'q<1'" in err[0], err
     assert not out.exists()
+
+
+def test_cavity_caps_are_wall_where_no_rock_lies_beyond_them():
+    """cases/scenes/tunnel_blocks.toml (the tunnel is carved before the joint discs cut the crown): every face on
+    the tunnel's facet planes is labelled by what lies beyond it, by brute force: points just outside a face
+    labelled the tunnel's wall lie in the tunnel and in no block; a face labelled the tunnel's cap (intact rock)
+    has another block beyond at least one of its points (random points of the face, 1e-6 of the block's size out)."""
+    from cases import SCENES
+    from sgim.scene import load_scene
+
+    sc = load_scene(SCENES / "tunnel_blocks.toml")
+    m = build_blocks(sc)
+    names = [s.name for s in m.sources]
+    wall, cap = names.index("tunnel"), names.index("tunnel (split)")
+    mesh = sc.cavities[0].mesh
+    rng = np.random.default_rng(3)
+    seen = {wall: 0, cap: 0}
+    for b in m.blocks:
+        n, _ = face_planes(b)
+        size = np.ptp(b.v, axis=0).max()
+        for k, s in enumerate(b.src):
+            if s not in seen:
+                continue
+            corners = b.v[b.faces[k]]
+            w = rng.dirichlet(np.ones(len(corners)), size=200)
+            pts = w @ corners + 1e-6 * size * n[k]
+            beyond = point_counts(m, pts)
+            if s == wall:
+                assert (beyond == 0).all() and np.asarray(mesh.inside(pts), bool).all()
+            else:
+                assert beyond.max() == 1
+            seen[s] += 1
+    assert seen[wall] > 0 and seen[cap] > 0, seen
