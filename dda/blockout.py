@@ -28,7 +28,7 @@ from .shapes import GeometryError
 
 def cmd_blocks(args):
     # not at the top: the cutting kernels load when a model is built (a fast --help)
-    from .geoblocks import build_blocks, write_blocks
+    from .geoblocks import build_blocks, stage_line, write_blocks
 
     scene = load_scene(args.scene)
     cut_away = scene.render.cut_away if args.cut_away is None else args.cut_away
@@ -43,7 +43,7 @@ def cmd_blocks(args):
     say = progress_printer(args.quiet)
     dest = output_folder(out, "dda blocks", force=args.force, say=say)
     try:
-        model = build_blocks(scene, progress=lambda stage, n, s: say and say(f"{stage:<11}{n} blocks  {s:.2f} s"))
+        model = build_blocks(scene, progress=lambda *a: say and say(stage_line(*a)))
     except GeometryError as exc:
         raise CliError(f"{args.scene}: {exc}") from None
     with dest.assemble() as tmp:

@@ -498,6 +498,11 @@ def _merge_slivers(pool, min_volume, stats):
     pool.replace({i: [] for i in gone})
 
 
+def stage_line(stage, n, seconds):
+    """One progress line of a cutting stage (``build_blocks``' progress callback arguments)."""
+    return f"{stage:<13}{n} blocks  {seconds:.2f} s"
+
+
 def build_blocks(scene, progress=None) -> BlockModel:
     """The block model of an sgim Scene (sgim.scene.load_scene); see the module docstring."""
     spec = scene.blocks if getattr(scene, "blocks", None) is not None else default_spec(scene)
@@ -563,4 +568,4 @@ def write_blocks(model, folder):
     return summary
 
 
-__all__ = ["KINDS", "BlockModel", "Source", "build_blocks", "write_blocks"]
+__all__ = ["KINDS", "BlockModel", "Source", "build_blocks", "stage_line", "write_blocks"]

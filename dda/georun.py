@@ -30,7 +30,7 @@ from sgim.scene import load_scene as load_sgim_scene
 
 from .blockcut import face_planes
 from .contactlaw import ContactLaw
-from .geoblocks import DOMAIN, EXCAVATION, INTACT, build_blocks, default_spec
+from .geoblocks import DOMAIN, EXCAVATION, INTACT, build_blocks, default_spec, stage_line
 from .limits import check_block_run
 from .polyhedra import PolyhedronError, check_convex
 from .shapes import GeometryError, convex_hull
@@ -266,7 +266,7 @@ def load_geo_scene(path, progress=None) -> GeoScene:
     """The GeoScene of the sgim scene file `path` (SceneError on a bad scene, before anything is cut);
     `progress(line)` receives a line per cutting stage."""
     scene = load_sgim_scene(path)
-    say = None if progress is None else (lambda stage, n, s: progress(f"cut        {stage:<11}{n} blocks  {s:.2f} s"))
+    say = None if progress is None else (lambda *a: progress("cut        " + stage_line(*a)))
     return geo_scene(scene, progress=say, path=path)
 
 
