@@ -365,6 +365,9 @@ def sleep_stage(blocks, loads, grid, lists, sleep, acc, work, tally, count):
             static[i] = True
             sleep.pe_sl[i] = _load_potential(i, blocks, loads)
             acc[ACC_SLEEPING] += sleep.pe_sl[i]
+            # this step's potential holds the block's already (integrate, at its position before the step):
+            # close_step adds acc, which now holds it too (at its position after the step)
+            tally[T_POT] -= sleep.pe_sl[i]
             changed = True
         veto[i] = False
     for e in range(count[C_WAKE]):
@@ -375,6 +378,9 @@ def sleep_stage(blocks, loads, grid, lists, sleep, acc, work, tally, count):
             static[j] = False
             calm[j] = 0
             acc[ACC_SLEEPING] -= sleep.pe_sl[j]
+            # it slept through this step's integration: its potential is this step's still (from next step on,
+            # integrate's)
+            tally[T_POT] += sleep.pe_sl[j]
             changed = True
     tally[T_DAMPING] += d_sleep
     if not changed:

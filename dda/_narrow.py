@@ -2,7 +2,8 @@
 
 For each candidate pair (i, j) of the broad phase (``narrow_phase``):
 
-1. last step's record of the pair (a hash table on the pair key, ``hash_pairs``);
+1. last step's record of the pair (a hash table on the pair key, ``hash_pairs``), or of the pair with its
+   roles swapped (a block fell asleep or woke), turned round;
 2. the common plane: last step's plane (or the centroids' line) is checked first (a positive gap along it proves
    the blocks apart); else the Fast Common-Plane search from it, confirmed by the separating-axis search for a new
    or deep overlap;
@@ -171,6 +172,23 @@ def hash_pairs(con, old):
     return hmask
 
 
+@njit(cache=True)
+def _swap_roles(slot, nrm_old, npt_old, pid_old, us_old, fd_old, nhe):
+    """Last step's record `slot` of a pair turned round (its B is A now): the normal (A -> B), the shear
+    displacement of B relative to A and the damping force on B change sign; an edge crossing's feature id names
+    A's half-edge first (dda/_fcp.py contact_points), a vertex's id (its index + 1) and the midpoint's (0) stay."""
+    for a in range(3):
+        nrm_old[slot, a] = -nrm_old[slot, a]
+    for r in range(npt_old[slot]):
+        for a in range(3):
+            us_old[slot, r, a] = -us_old[slot, r, a]
+            fd_old[slot, r, a] = -fd_old[slot, r, a]
+        pid = pid_old[slot, r]
+        if pid < 0:
+            ha = (-pid - 1) // nhe
+            pid_old[slot, r] = -(1 + (-pid - 1 - ha * nhe) * nhe + ha)
+
+
 @njit(cache=True, inline="always")
 def _effective_mass(kin_i, kin_j, static_j, m_i, m_j):
     """Mass of the contact's normal mode: the free block's when the other is fixed, asleep or prescribed."""
@@ -258,13 +276,22 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
     force, torque, qs = forces.force, forces.torque, forces.qs
     face_row, face_shape, face_geo, intact_row = law.face_row, law.face_shape, law.face_geo, law.intact_row
     kinds = len(face_row) > 0
-    pos_old = con.pos[old]
+    pos_old, a_old, b_old, nhe = con.pos[old], con.a[old], con.b[old], he_origin.shape[0]
     for p in range(npair):
         i = pa[p]
         j = pb[p]
         key = i * nbody + j
-        # 1. last step's slot of the pair
+        # 1. last step's slot of the pair; else its slot with the roles swapped (one of the blocks fell asleep or
+        # woke: a pair's A is an awake block), turned round and taken over, so that a cemented point keeps its
+        # bond and every point its shear history
         slot = _find_slot(key, hmask, htab, key_old)
+        if slot < 0 and not first_step:
+            slot = _find_slot(j * nbody + i, hmask, htab, key_old)
+            if slot >= 0:
+                _swap_roles(slot, nrm_old, npt_old, pid_old, us_old, fd_old, nhe)
+                key_old[slot] = key
+                a_old[slot] = i
+                b_old[slot] = j
         size = min(size_b[i], size_b[j])
         mi = material[i]
         mj = material[j]
@@ -505,14 +532,6 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                 if not matched[r]:
                     _book_vanished(tally, i, j, fixed[i], static[j], pos_old[slot, r], depth_old[slot, r],
                                    fn_old[slot, r], us_old[slot, r], fd_old[slot, r], ks, nrm, dt, blocks)
-        elif not first_step:
-            # last step's pair of the blocks with their roles swapped (one fell asleep or woke): its points
-            # vanish as this pair's appear (they are booked as created)
-            sw = _find_slot(j * nbody + i, hmask, htab, key_old)
-            if sw >= 0:
-                for r in range(npt_old[sw]):
-                    _book_vanished(tally, j, i, static[j], fixed[i], pos_old[sw, r], depth_old[sw, r],
-                                   fn_old[sw, r], us_old[sw, r], fd_old[sw, r], ks, nrm_old[sw], dt, blocks)
         if sleep_on and kept > 0:
             moving_i = kin[i] or calm[i] < n_calm
             if not asleep[j]:

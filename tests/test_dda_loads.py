@@ -244,3 +244,50 @@ def test_sleep_scene_keys():
     d["simulation"]["sleep_steps"] = 0
     with pytest.raises(SceneError):
         scene_from_dict(d)
+
+
+def _bonded(sim, a, b):
+    """(A, bonded points) of the contact between blocks a and b (either as A)."""
+    c = int(sim.cur[0])
+    for s in range(int(sim.c_n_pair[c])):
+        if {int(sim.c_a[c, s]), int(sim.c_b[c, s])} == {a, b}:
+            return int(sim.c_a[c, s]), int(sim.c_bond[c, s, :sim.c_np[c, s]].sum())
+    return -1, 0
+
+
+def test_cemented_hanging_blocks_sleep_and_wake_with_their_bonds_and_closed_balance():
+    """Two blocks hanging in tension from a fixed roof 10 m up by cemented contacts (cohesion and tensile
+    strength, bonded at the start) settle and fall asleep; a prescribed block sliding past the lower one within the
+    search gap, never touching it, wakes it (its contact with the sleeping upper block then has the lower block as
+    A), and both fall asleep again. Every bonded point keeps its bond through it, the blocks stay where they settled
+    (stretched W / (4 kn) per contact: 1.3e-5 m and 1.9e-5 m), nothing moves once asleep, and the energy balance of
+    every step is closed, the steps where blocks fall asleep and wake included (a block falling asleep counted its
+    potential twice in that step, a block waking not at all: 2.2e5 J here, taken for a blow-up)."""
+    bs = BlockSystem()
+    roof = bs.add_block(box((-2, -2, 10), (2, 2, 11)), fixed=True)
+    up = bs.add_block(box((-0.5, -0.5, 9), (0.5, 0.5, 10)))
+    lo = bs.add_block(box((-0.5, -0.5, 8), (0.5, 0.5, 9)))
+    c = 0.01  # the passing block's clearance: within the search gap (0.021 m), beyond the bonds' kept gap (1e-3 m)
+    bs.add_block(box((0.5 + c, -3.25, 8.25), (1.0 + c, -2.75, 8.75), velocity=(0, 10.0, 0)), prescribed=True)
+    sim = Simulation(bs, ContactLaw(kn=1e9, friction_deg=30.0, cohesion=1e6, tensile=1e6, damping=0.2), sleep=True)
+    assert sim.keep_gap < c < sim.gap
+    res = [sim.run(0.2, record_every=sim.dt)]
+    # asleep before the passing block comes near (y = -0.52 at t = 0.223 s), the contact's A the upper block
+    assert sim.asleep[[up, lo]].all() and _bonded(sim, up, lo) == (up, 4)
+    states = []
+    for _ in range(50):  # it passes the lower block from t = 0.223 to 0.377 s
+        res.append(sim.run(0.005, record_every=sim.dt))
+        states.append(tuple(sim.asleep[[up, lo]]))
+    assert (False, False) in states and states[-1] == (True, True), set(states)
+    # the lower block woke first (its contact with the sleeping upper block turned round) and the bonds held
+    assert _bonded(sim, up, lo) == (lo, 4) and _bonded(sim, roof, up) == (up, 4)
+    W = 2600.0 * G
+    d = np.linalg.norm(sim.pos - sim.pos0, axis=1)
+    assert d[up] == pytest.approx(2 * W / 4e9, rel=0.05) and d[lo] == pytest.approx(3 * W / 4e9, rel=0.05), d
+    p = sim.pos[[up, lo]].copy()
+    res.append(sim.run(0.05, record_every=sim.dt))
+    assert np.array_equal(sim.pos[[up, lo]], p)
+    err = np.concatenate([np.asarray(r.energy)[1:, 7] for r in res])
+    elastic = res[-1].energy_column("elastic")[-1]  # 1/2 (2W) d_up + 1/2 W (d_lo - d_up): 0.33 J
+    assert elastic == pytest.approx(0.5 * (2 * W) * d[up] + 0.5 * W * (d[lo] - d[up]), rel=0.05)
+    assert np.abs(err).max() < 0.02 * elastic, np.abs(err).max()

@@ -396,9 +396,7 @@ def test_point_law_follows_the_face_kind():
 
 def test_dda_run_cli_on_an_sgim_scene(tmp_path):
     data = key_block_data(True)
-    # intact rock with cohesion only: with both cohesion and tensile strength this run blows up once blocks sleep
-    # (an open problem of sleeping with cemented contacts in tension, see the commit that added this test)
-    data["blocks"].update({"cohesion": 1e6, "tensile": 0.0})
+    data["blocks"].update({"cohesion": 1e6, "tensile": 1e6})  # intact rock cemented, in tension under the roof
     data["blocks"]["run"] = {"duration": 0.2, "frames": 2, "sleep": True, "fixed": ["x-", "x+", "z-"]}
     scene = tmp_path / "key.toml"
     scene.write_text(_toml(data))
