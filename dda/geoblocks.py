@@ -146,12 +146,16 @@ class _Pool:
         c, h = (self.lo + self.hi) / 2, (self.hi - self.lo) / 2
         sel = np.abs(c @ n - d) < np.abs(h) @ np.abs(n)
         if lo is not None:
-            sel &= np.all(self.lo <= hi, axis=1) & np.all(self.hi >= lo, axis=1)
+            sel &= self.overlaps(lo, hi)
         return np.nonzero(sel)[0]
+
+    def overlaps(self, lo, hi):
+        """(n,) bool: the blocks whose box overlaps the box lo..hi."""
+        return np.all(self.lo <= hi, axis=1) & np.all(self.hi >= lo, axis=1)
 
     def near(self, lo, hi):
         """Indices of the blocks whose box overlaps the box lo..hi."""
-        return np.nonzero(np.all(self.lo <= hi, axis=1) & np.all(self.hi >= lo, axis=1))[0]
+        return np.nonzero(self.overlaps(lo, hi))[0]
 
     def replace(self, repl):
         """Replace block i by the list repl[i] for every i in the dict ``repl`` (boxes computed for new blocks only)."""
@@ -356,7 +360,7 @@ def _cavities(pool, scene, sources, walls):
         wall, cut = len(sources) - 2, len(sources) - 1
         walls.append((cav, wall, cut))
         repl = {}
-        for i in np.nonzero(np.all(pool.lo <= cv.mesh.hi, axis=1) & np.all(pool.hi >= cv.mesh.lo, axis=1))[0]:
+        for i in pool.near(cv.mesh.lo, cv.mesh.hi):
             b = pool.blocks[i]
             out = carve_block(b, cav, wall, cut)
             if len(out) != 1 or out[0] is not b:
@@ -476,7 +480,7 @@ def _merge_slivers(pool, min_volume, stats):
         if vol[i] >= min_volume or i in gone:
             continue
         eps = REL * pool.blocks[i].diag()
-        near = np.nonzero(np.all(pool.lo <= pool.hi[i] + eps, axis=1) & np.all(pool.hi >= pool.lo[i] - eps, axis=1))[0]
+        near = pool.near(pool.lo[i] - eps, pool.hi[i] + eps)
         a = pool.blocks[i]
         na, da = face_planes(a)
         for j in sorted(near.tolist(), key=lambda j: -vol[j]):

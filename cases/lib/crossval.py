@@ -343,14 +343,16 @@ def planar_reference(dip):
 @dataclass(frozen=True)
 class Sliding:
     """An onset case of the table: its run scene, the direction the body slides in (unit vector), the reference
-    angle phi_c [deg] and how the row names it, what slides (the row's note), the reference's geometry (`moving`
-    criteria may read it) and the LIGGGHTS run's contact damping ratio (liggghts_wedge)."""
+    angle phi_c [deg] and how the row names it, what slides (the row's note), the joints it slides on as the note
+    says them, the reference's geometry (`moving` criteria may read it) and the LIGGGHTS run's contact damping
+    ratio (liggghts_wedge)."""
     name: str
     scene: Path
     line: np.ndarray
     phi_c: float
     reference: str
     body: str
+    joints: str = "the joint"
     geo: object = None
     liggghts_damping: float = 0.0
 
@@ -358,7 +360,8 @@ class Sliding:
 def wedge_sliding():
     """The sphere wedge: it slides along the line of intersection of its joints; reference Hoek & Bray."""
     geo, line = _wedge_line(WEDGE)
-    return Sliding("wedge", CV / "wedge.toml", line, geo.critical_friction, "Hoek & Bray", "wedge", geo)
+    return Sliding("wedge", CV / "wedge.toml", line, geo.critical_friction, "Hoek & Bray", "wedge", "each joint",
+                   geo)
 
 
 def planar_sliding():
@@ -562,7 +565,7 @@ def case_planar(engines, work, say, timeout, iterations=7):
 
 
 def _onset_note(case, engine, walls=False):
-    each = "each joint" if case.name == "wedge" else "the joint"
+    each = case.joints
     if engine == "liggghts":
         damped = f", wall contacts damped at {case.liggghts_damping:g} of critical" if case.liggghts_damping else ""
         return (f"no smooth joint in LIGGGHTS-PUBLIC: the rock below {each} is a mesh wall (fix wall/gran, joint "
