@@ -269,6 +269,19 @@ def parse_cut(expr):
     return "xyz".index(e[0]), (1.0 if e[1] == ">" else -1.0), value
 
 
+def _vertices_faces(rd, tab, key):
+    """The `vertices` and `faces` of table `key` (faces required, every index a vertex's)."""
+    if "faces" not in tab:
+        rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
+    verts = rd.matrix(tab, "vertices", f"{key}.vertices", 3, **COORD)
+    faces = rd.matrix(tab, "faces", f"{key}.faces", 3, integer=True)
+    bad = np.nonzero((faces < 0) | (faces >= len(verts)))[0]
+    if bad.size:
+        i = int(bad[0])
+        rd.err(f"{key}.faces[{i}]", faces[i].tolist(), f"vertex index out of range 0..{len(verts) - 1}")
+    return verts, faces
+
+
 def _read_surface(rd, ex, key, domain, scene_path):
     if not isinstance(ex, dict):
         rd.err(key, ex, "must be a table")
@@ -280,14 +293,7 @@ def _read_surface(rd, ex, key, domain, scene_path):
         rd.err(key, sorted(ex), "give exactly one of: vertices+faces, points, file")
     form = forms[0]
     if form == "vertices":
-        if "faces" not in ex:
-            rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
-        verts = rd.matrix(ex, "vertices", f"{key}.vertices", 3, **COORD)
-        faces = rd.matrix(ex, "faces", f"{key}.faces", 3, integer=True)
-        bad = np.nonzero((faces < 0) | (faces >= len(verts)))[0]
-        if bad.size:
-            i = int(bad[0])
-            rd.err(f"{key}.faces[{i}]", faces[i].tolist(), f"vertex index out of range 0..{len(verts) - 1}")
+        verts, faces = _vertices_faces(rd, ex, key)
         face_key = f"{key}.faces"
     elif form == "points":
         if "faces" in ex:
@@ -395,14 +401,7 @@ def _mesh_from_table(rd, tab, key, scene_path, shape_keys, build_shape):
             if k in extra:
                 rd.err(f"{key}.{k}", tab[k], f"goes with a shape, not with {form}")
     if form == "vertices":
-        if "faces" not in tab:
-            rd.err(f"{key}.faces", None, "missing value (vertices need faces)")
-        verts = rd.matrix(tab, "vertices", f"{key}.vertices", 3, **COORD)
-        faces = rd.matrix(tab, "faces", f"{key}.faces", 3, integer=True)
-        bad = np.nonzero((faces < 0) | (faces >= len(verts)))[0]
-        if bad.size:
-            i = int(bad[0])
-            rd.err(f"{key}.faces[{i}]", faces[i].tolist(), f"vertex index out of range 0..{len(verts) - 1}")
+        verts, faces = _vertices_faces(rd, tab, key)
         return verts, faces, "vertices", (f"{key}.faces", None), {}
     if "faces" in tab:
         rd.err(f"{key}.faces", tab["faces"], f"faces go with vertices, not with {form}")
