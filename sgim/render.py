@@ -9,6 +9,7 @@ from ctypes.util import find_library
 
 import numpy as np
 
+from ._render import column_bounds, front_depths, mark_extremes, project_rows, reaches_front
 from .common import atomic_path
 from .model import SphereModel
 from .portable import matmul, norm, sin_cos_deg
@@ -195,16 +196,15 @@ class Frame:
         self.scale, self._d, self._right, self._up, self._focal = s, d, right, up, focal
         return s
 
-    def project(self, points):
+    def project(self, points, rows=None):
         """Window coordinates x, y [pixels from the lower left corner] and depth t [m along the view, growing away
-        from the eye] of `points` (n x 3) through the camera of :meth:`fit`, one rounding per product and sum
-        (numpy's elementwise operations: the same bits on every CPU)."""
-        p = [np.asarray(points, float)[:, a] - self._focal[a] for a in range(3)]
-        r, u, d = self._right, self._up, self._d
-        x = (p[0] * r[0] + p[1] * r[1] + p[2] * r[2]) / self.scale + self.W / 2
-        y = (p[0] * u[0] + p[1] * u[1] + p[2] * u[2]) / self.scale + self.H / 2
-        t = -(p[0] * d[0] + p[1] * d[1] + p[2] * d[2])
-        return x, y, t
+        from the eye] of `points` (n x 3), or of points[rows], through the camera of :meth:`fit`, one rounding per
+        product and sum (sgim/_render.py, project_rows: the same bits on every CPU)."""
+        pts = np.ascontiguousarray(points, dtype=float)
+        rows = np.arange(len(pts)) if rows is None else np.asarray(rows, np.int64)
+        return project_rows(pts, rows, np.asarray(self._focal, float), np.asarray(self._right, float),
+                            np.asarray(self._up, float), np.asarray(self._d, float), float(self.scale),
+                            self.W / 2, self.H / 2)
 
     def axes(self, lo, hi):
         """The box lo..hi in grey with three of its edges as axes (the lower front edges along x and y, the left
@@ -450,10 +450,11 @@ def sight_tolerances(frame, centers, px):
     """R [pixels], eps [pixels], bulge [m] and tol [m] of :func:`in_sight` for sprites of `px` pixels: eps is
     SIGHT_EPS_PX plus the float32 rounding of the largest coordinate on screen, tol a thousandth of the bulge plus
     that rounding plus a millionth of the model's size (the depth buffer's resolution)."""
-    big = float(np.abs(centers).max()) * FLOAT32_ULPS if len(centers) else 0.0
+    lo, hi = column_bounds(np.ascontiguousarray(centers, dtype=float)) if len(centers) else (np.zeros(3),) * 2
+    big = float(np.maximum(np.abs(lo), np.abs(hi)).max()) * FLOAT32_ULPS
     bulge = px * frame.scale
     eps = SIGHT_EPS_PX + big / frame.scale
-    tol = 1e-3 * bulge + big + 1e-6 * (float(np.ptp(centers, axis=0).max()) if len(centers) else 0.0)
+    tol = 1e-3 * bulge + big + 1e-6 * float((hi - lo).max())
     return px / 2.0, eps, bulge, tol
 
 
@@ -469,16 +470,15 @@ def in_sight(frame, centers, solid, ghost, px):
     (tests/test_render_sight.py compares both pictures). Only the opaque sprites hide; translucent ones are
     hidden by them alone. What is left is about the spheres on the outer surface of the body and on the cut-away
     planes, a few layers deep, whatever the number inside."""
-    from ._render import front_depths, reaches_front
-
     if not len(solid):
         return solid, ghost
+    centers = np.ascontiguousarray(centers, dtype=float)
     R, eps, bulge, tol = sight_tolerances(frame, centers, px)
-    x, y, t = frame.project(centers[solid])
+    x, y, t = frame.project(centers, solid)
     buf = front_depths(x, y, t, R, eps, bulge, frame.W, frame.H)
     solid = _with_extremes(solid, centers, reaches_front(x, y, t, buf, R, eps, bulge, tol))
     if len(ghost):
-        gx, gy, gt = frame.project(centers[ghost])
+        gx, gy, gt = frame.project(centers, ghost)
         ghost = _with_extremes(ghost, centers, reaches_front(gx, gy, gt, buf, R, eps, bulge, tol))
     return solid, ghost
 
@@ -487,10 +487,8 @@ def _with_extremes(idx, centers, keep):
     """idx[keep] and the spheres of idx with the least and the largest coordinate along each axis: VTK rounds the
     points it draws to float32 about the middle of their bounds, so keeping the bounds keeps the same rounding
     (and the picture the same bit for bit far from the origin too)."""
-    c = centers[idx]
     keep = keep.copy()
-    keep[np.argmin(c, axis=0)] = True
-    keep[np.argmax(c, axis=0)] = True
+    mark_extremes(centers, np.asarray(idx, np.int64), keep)
     return idx[keep]
 
 
@@ -517,7 +515,8 @@ def render(model: SphereModel, path, hide_intact=False, translucent=False, cut_a
     pl = frame.pl
     if model.n:
         rmax = float(model.radii.max())
-        lo, hi = model.centers.min(0) - rmax, model.centers.max(0) + rmax
+        lo, hi = column_bounds(np.ascontiguousarray(model.centers, dtype=float))
+        lo, hi = lo - rmax, hi + rmax
     else:
         rmax, lo, hi = 1.0, np.zeros(3), np.ones(3)
     s = frame.fit(lo, hi)
