@@ -293,6 +293,11 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                 a_old[slot] = i
                 b_old[slot] = j
         size = min(size_b[i], size_b[j])
+        # a cut block model's neighbours meet face to face within rounding (the cutter's 1e-9 of a block): an
+        # overlap below contact_points' tolerance is none to confirm by the separating axes nor to represent by a
+        # point (the open pit: 45 000 of 223 000 pairs a step, overlaps of 1e-15 of their size, most of a step's
+        # cost); the blocks of every other scene keep the exact test (and their results' bits)
+        tol = 1e-9 * size if kinds else 0.0
         mi = material[i]
         mj = material[j]
         ks = lawtab[mi, mj, LAW_KS]
@@ -324,7 +329,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                                          he_face, vert_he, nrm, 1e-13 * size, 50, nrm)
             count[C_FIT] += its
             k = contact_points(geom, i, j, nrm, sa, sb, kg, size, p_pos, p_depth, p_id, scr, iscr)
-            if g < 0.0 and (slot < 0 or npt_old[slot] == 0 or g < -0.01 * size or _unshown(p_depth, k, g)):
+            if g < -tol and (slot < 0 or npt_old[slot] == 0 or g < -0.01 * size or _unshown(p_depth, k, g)):
                 for a in range(3):
                     n_sat[a] = nrm[a]
                 g2 = sat_search(vert, fnw, vs[i], vs[i + 1], fs[i], fs[i + 1], es[i], es[i + 1], vs[j], vs[j + 1],
@@ -358,7 +363,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
             # 3. the contact points (above), plus one more when the plane's overlap sa - sb is not represented: when
             # no point found reaches half of it (tip against tip, or an edge that pierces a face, which the
             # candidates do not include)
-            if sa - sb > 0.0 and _unshown(p_depth, k, sb - sa) and k < MAXP:
+            if sa - sb > tol and _unshown(p_depth, k, sb - sa) and k < MAXP:
                 # the deepest point where an edge of one block runs through the other: a point of the overlap
                 # whose depth changes with the blocks' relative velocity there; else the support points' own
                 # overlap at their midpoint (that depth changes with the support points' velocities, up to a

@@ -30,7 +30,8 @@ below ``sleep_velocity`` and its acceleration below ``sleep_accel`` for ``sleep_
 contacts are all with fixed, sleeping or equally calm blocks, is no longer integrated nor searched for contacts
 (its resting contacts are kept as they are); it wakes when a moving block touches it. Defaults:
 sleep_velocity = 1e-4 sqrt(g d50), sleep_accel = 1e-3 g (d50 the median block size; g = 9.81 without
-gravity). ``sim.active`` lists the awake moving blocks, ``sim.asleep`` flags the sleeping ones.
+gravity). ``sim.active`` lists the awake moving blocks, ``sim.asleep`` flags the sleeping ones;
+``sim.fall_asleep(blocks)`` puts free blocks to sleep at once (a run that starts from a settled state).
 
 Deformable blocks (``dof = 12`` in the BlockSpec, E and nu of the block's material): the state adds six
 body-frame strains (``sim.strain(i)``, engineering shear strains, the constant strain of DDA's first-order
@@ -56,9 +57,9 @@ from . import _integrate as _it
 from ._broad import LARGE, build_grid, buckets_for, map_cells, n_cells
 from ._deform import critical_omega2, deform_geometry
 from ._fcp import MAXP
-from ._state import (LAW_KN, LAW_TEN, LAW_ZETA, NENERGY, NLAW, NSTATS, ST_CONTACTS, ST_FCP_ITER, ST_NEED,
-                     ST_POINTS, Blocks, Books, Contacts, Deform, Forces, Geometry, Grid, Law, Lists, Loads, Sleep,
-                     State)
+from ._state import (ACC_SLEEPING, E_DAMPING, LAW_KN, LAW_TEN, LAW_ZETA, NENERGY, NLAW, NSTATS, ST_CONTACTS,
+                     ST_FCP_ITER, ST_NEED, ST_POINTS, Blocks, Books, Contacts, Deform, Forces, Geometry, Grid, Law,
+                     Lists, Loads, Sleep, State)
 from .contactlaw import ContactLaw
 from ._kinds import no_kinds
 from .progress import tracker
@@ -323,6 +324,34 @@ class Simulation:
     @property
     def n_asleep(self):
         return int(self.asleep.sum())
+
+    def fall_asleep(self, which):
+        """Put the free rigid blocks `which` (indices) to sleep now, as a calm block falls asleep in a run
+        (dda/_integrate.py sleep_stage): at rest where they are, neither integrated nor searched; their contacts
+        with fixed and sleeping blocks are carried over, and a moving block that comes near wakes them. Their kinetic
+        energy, if any, is counted as damped. For a run that starts from a settled state (and for benchmarks of
+        half-asleep scenes); needs sleep=True."""
+        if self.sleep_par[0] <= 0:
+            raise ValueError("fall_asleep needs a run with sleep=True")
+        A = self.A
+        which = np.unique(np.asarray(which, np.int64))
+        if np.any(A.fixed[which] | A.kin[which] | self.dof12[which]):
+            raise ValueError("only free rigid blocks fall asleep")
+        st = self.bundles()
+        for i in which[~self.asleep[which]]:
+            R = quat_to_matrix(self.quat[i])
+            w = R @ ((R.T @ self.angmom[i]) / A.inertia[i])
+            self.energy[E_DAMPING] += 0.5 * A.mass[i] * float(self.vel[i] @ self.vel[i]) \
+                + 0.5 * float(self.angmom[i] @ w)
+            self.vel[i] = 0.0
+            self.angmom[i] = 0.0
+            self.asleep[i] = True
+            self.calm[i] = int(self.sleep_par[3])
+            self.pe_sl[i] = _it._load_potential(i, st.blocks, st.loads)
+            self.acc[ACC_SLEEPING] += self.pe_sl[i]
+        self.active = self.movable[~self.asleep[self.movable]]
+        self.mstart, self.mentries, self.fstart, self.fentries, self.large_list = _it.regrid(
+            self.active, A.fixed | self.asleep, self.cellbox, self.large)
 
     def run(self, duration, record_every=None, progress=None) -> Results:
         """Advance by `duration` seconds; record every `record_every` seconds (default duration / 100).

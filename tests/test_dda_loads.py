@@ -220,6 +220,24 @@ def test_settled_stack_costs_no_integration_and_keeps_its_energy_balance():
     assert len(s1.contacts()["a"]) == len(s0.contacts()["a"])
 
 
+def test_blocks_put_to_sleep_at_once_cost_nothing_until_a_moving_block_hits_them():
+    """Simulation.fall_asleep: the stack put to sleep where it stands is not integrated (only the projectile is),
+    does not move, keeps the energy balance closed, and wakes when the projectile strikes it (t = 0.75 s)."""
+    bs, ids, p = _stack_and_projectile()
+    sim = Simulation(bs, ContactLaw(kn=1e9, friction_deg=30.0, damping=0.2), sleep=True)
+    sim.fall_asleep(ids)
+    assert list(sim.active) == [p] and sim.asleep[ids].all()
+    res = sim.run(0.7, record_every=0.05)
+    assert np.array_equal(sim.pos[ids], sim.pos0[ids]) and sim.asleep[ids].all()
+    # the balance stays what the projectile's first step makes of it (0.18 J of its 5715 J, as without sleeping)
+    err, ke = res.energy_column("balance_error")[1:], res.energy_column("kinetic")[1]
+    assert np.ptp(err) < 1e-9 * ke and abs(err[0]) < 1e-4 * ke
+    sim.run(0.15, record_every=0.05)
+    assert not sim.asleep[ids[2]] and np.linalg.norm(sim.displacement(ids[2])) > 0.01
+    with pytest.raises(ValueError):
+        sim.fall_asleep([0])  # the fixed floor
+
+
 def test_two_calm_blocks_touching_fall_asleep_together_and_stay_still():
     # each block touches the other, which is awake but calm: the pair must fall asleep together
     bs = BlockSystem()
