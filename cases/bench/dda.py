@@ -1,8 +1,8 @@
 """Benchmarks of the explicit 3D DDA engine (tables on stdout; timing never goes into a test).
 
-    .venv/bin/python -m cases.bench.dda                   # every part
+    .venv/bin/python -m cases.bench.dda                   # every part but pit
     .venv/bin/python -m cases.bench.dda scaling fixed     # some parts
-    parts: scaling, fall1500, fixed, yade, error
+    parts: scaling, fall1500, fixed, yade, error, pit
 
 scaling   cost per step against block count (100 .. 10 000): falling polyhedra (no contacts yet) and
           resting columns of cubes (every block in contact), microseconds per block-step
@@ -12,6 +12,10 @@ fixed     10 000 fixed blocks + 10 moving ones against the 10 moving ones alone 
 yade      YADE Polyhedra (Debian yade, CGAL) on the same falling scene, same dt and steps: block-steps per second
 error     speed against error: incline (dt x kn, against the analytical solution), second-order convergence in
           dt, undamped impact (energy balance error), wedge (critical friction against Hoek & Bray)
+pit       the open pit's block run (cases/scenes/open_pit_blocks.toml as `dda run` builds it): ms per step, us per
+          block-step and per awake block-step, all awake (the run from its start), the free blocks west of x = 0
+          asleep, and all asleep (Simulation.fall_asleep): sleeping blocks cost no integration (not in `every part`:
+          the cut alone takes a minute; `python -m cases.bench.dda pit`)
 """
 from __future__ import annotations
 
@@ -318,13 +322,144 @@ def part_error():
               f"{r['fs_dda'] / hb.fs - 1:+.2%} |", flush=True)
 
 
+def _pit_steps(sim, steps):
+    """Time `steps` single steps of sim: per step (wall s, CPU s, awake blocks, sleeping blocks, contacts)."""
+    out = []
+    for _ in range(steps):
+        t, c = time.perf_counter(), time.process_time()
+        sim.run(sim.dt, record_every=sim.dt)
+        out.append((time.perf_counter() - t, time.process_time() - c, len(sim.active), sim.n_asleep,
+                    int(sim.stats[5])))
+    return out
+
+
+def _pit_stages(sim, steps):
+    """CPU seconds of each stage of a step (dda/_integrate.py run_chunk's, called one at a time), medians over
+    `steps` steps, and the step's pairs, contacts, points and separating-axis searches."""
+    from dda import _integrate as it
+    from dda._narrow import carry_resting, hash_pairs, narrow_phase
+    from dda._state import C_CONTACTS, C_NEW, C_POINTS, C_SAT, NCOUNT, NTALLY
+
+    names = ("geometry", "broad phase", "pair table", "narrow phase", "resting pairs", "integration", "sleeping")
+    cpu, last = [], None
+    for _ in range(steps):
+        blocks, deform, loads, forces, geom, grid, lists, sleep, con, law, books = sim.bundles()
+        work = it.make_work(blocks, geom, sleep.asleep)
+        tally, count = np.zeros(NTALLY), np.zeros(NCOUNT, np.int64)
+        t = [time.process_time()]
+        lists = it.move_geometry(blocks, deform, geom, grid, lists, work.static, work.R)
+        t.append(time.process_time())
+        lists, npair = it.broad_phase(geom, grid, lists, work.static)
+        t.append(time.process_time())
+        new = 1 - con.cur[0]
+        hmask = hash_pairs(con, con.cur[0])
+        it.reset_forces(lists.active, blocks.dof12, forces, loads)
+        t.append(time.process_time())
+        narrow_phase(npair, lists.pa, lists.pb, hmask, False, sim.dt, law, grid.gap, blocks, deform, forces, geom,
+                     sleep, con, work, tally, count)
+        t.append(time.process_time())
+        carry_resting(law, blocks.material, sleep.asleep, con, work.static, tally, count)
+        con.n_pair[new] = count[C_NEW]
+        con.cur[0] = new
+        t.append(time.process_time())
+        it.integrate(sim.dt, sim.dt, sim.local_damping, blocks, deform, loads, forces, lists.active, sleep, books.acc,
+                     work, tally)
+        t.append(time.process_time())
+        lists = it.sleep_stage(blocks, loads, grid, lists, sleep, books.acc, work, tally, count)
+        t.append(time.process_time())
+        sim.set_lists(lists)
+        sim.steps += 1
+        sim.time += sim.dt
+        cpu.append(np.diff(t))
+        last = (npair, int(count[C_CONTACTS]), int(count[C_POINTS]), int(count[C_SAT]))
+    return dict(zip(names, np.median(cpu, axis=0))), last
+
+
+def _pit_dt(sim):
+    """Why the run's dt is what it is: per free block, its own step by Simulation.critical_dt's bound (NPOINT
+    springs kn at the largest vertex radius r: translation sqrt(k / m), rotation sqrt(k r^2 / I_min)), and by a
+    bound per principal axis (each spring at the worst vertex adds kn (1/m + sum_a rho_a^2 / I_a), rho_a its
+    distance from axis a: the trace of the 6 x 6 mass-normalised stiffness, so never below the highest frequency).
+    Lines of text."""
+    from dda._state import LAW_KN, LAW_ZETA
+    from dda.simulation import NPOINT
+
+    A, free = sim.A, sim.free
+    k = NPOINT * float(sim.lawtab[:, :, LAW_KN].max())
+    z = float(sim.lawtab[:, :, LAW_ZETA].max())
+    m, imin, r = A.mass[free], A.inertia[free].min(1), A.radius[free]
+    zr = z * np.sqrt(m * r * r / imin)
+    dt_t = sim.safety * 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + z * z) - z)
+    dt_r = sim.safety * 2.0 / np.sqrt(k * r * r / imin) * (np.sqrt(1.0 + zr * zr) - zr)
+    lam = np.empty(len(free))
+    thick = np.empty(len(free))
+    for q, i in enumerate(free):
+        v = A.vloc[A.vert_start[i]:A.vert_start[i + 1]]
+        rho2 = np.stack([v[:, 1] ** 2 + v[:, 2] ** 2, v[:, 0] ** 2 + v[:, 2] ** 2, v[:, 0] ** 2 + v[:, 1] ** 2], 1)
+        lam[q] = k * (1.0 / A.mass[i] + (rho2 / A.inertia[i]).sum(1).max())
+        thick[q] = min(np.ptp(v @ n) for n in A.nloc[A.face_start[i]:A.face_start[i + 1]])
+    dt_a = sim.safety * 2.0 / np.sqrt(lam) * (np.sqrt(1.0 + z * z) - z)
+    own = np.minimum(dt_t, dt_r)
+    w = int(np.argmin(own))
+    a = int(np.argmin(dt_a))
+    return [f"dt {sim.dt:.3g} s ({int(round(2.0 / sim.dt))} steps for 2 s) is set by block {free[w]} "
+            f"({A.volume[free[w]]:.3g} m3, {thick[w]:.2f} m thick, {sim.size_b[free[w]]:.1f} m long): its rotation "
+            f"bound {dt_r[w]:.3g} s against its translation bound {dt_t[w]:.3g} s; {int((own < 1e-5).sum())} free "
+            f"blocks have their own "
+            f"step below 1e-5 s, {int((own < 1e-4).sum())} below 1e-4 s (the median {np.median(own):.3g} s)",
+            f"a bound per principal axis would give dt {dt_a[a]:.3g} s (block {free[a]}, {A.volume[free[a]]:.3g} m3, "
+            f"{thick[a]:.2f} m thick), {dt_a[a] / sim.dt:.1f} x: {int(round(2.0 / dt_a[a]))} steps for 2 s; "
+            f"block {free[w]} {dt_a[w]:.3g} s by it"]
+
+
+def part_pit(steps=5):
+    from dda.georun import load_geo_scene
+
+    print("\n## The open pit's block run (cases/scenes/open_pit_blocks.toml): cost per block-step, awake and asleep")
+    t = time.perf_counter()
+    gs = load_geo_scene(SCENES / "open_pit_blocks.toml")
+    print(f"cut into {len(gs.blocks)} blocks in {time.perf_counter() - t:.0f} s; each state below: the run built "
+          f"anew, its first step (every pair new), then {steps} steps timed one by one (medians)\n")
+    print("| state | free blocks | awake | asleep | contacts | first step s | ms/step wall | ms/step CPU | "
+          "us CPU per block-step | us CPU per awake block-step |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for label in ("all awake (the run from its start)", "west half asleep (free blocks with x < 0)", "all asleep"):
+        _, sim = gs.build(check=False)
+        free = sim.free
+        t = time.perf_counter()
+        sim.run(sim.dt, record_every=sim.dt)  # the first step: every pair new (and the kernels load)
+        first = time.perf_counter() - t
+        if label.startswith("west"):
+            sim.fall_asleep(free[sim.pos[free, 0] < 0.0])
+        elif label == "all asleep":
+            sim.fall_asleep(free)
+        rows = _pit_steps(sim, steps)
+        w, c = float(np.median([r[0] for r in rows])), float(np.median([r[1] for r in rows]))
+        awake = int(np.median([r[2] for r in rows]))
+        print(f"| {label} | {len(free)} | {awake} | {rows[-1][3]} | {rows[-1][4]} | {first:.1f} | {1e3 * w:.0f} | "
+              f"{1e3 * c:.0f} | {1e6 * c / len(free):.1f} | {f'{1e6 * c / awake:.1f}' if awake else '-'} |", flush=True)
+        if label.startswith("west"):
+            print("|  its steps (a moving block that comes near a sleeping one wakes it): awake, ms CPU | "
+                  + ", ".join(f"{r[2]}: {1e3 * r[1]:.0f}" for r in rows) + " | | | | | | | | |")
+        if label.startswith("all awake"):
+            stages, (npair, ncon, npts, nsat) = _pit_stages(sim, steps)
+            why_dt = _pit_dt(sim)
+        del sim
+    print(f"\nA step of the run with every block awake, stage by stage (CPU ms, medians of {steps} steps): "
+          + ", ".join(f"{k} {1e3 * v:.0f}" for k, v in stages.items())
+          + f"; {npair} candidate pairs, {ncon} with contact points, {npts} points kept, {nsat} separating-axis "
+            f"searches\n")
+    print("\n".join(why_dt))
+
+
 PARTS = {"scaling": part_scaling, "fall1500": part_fall1500, "fixed": part_fixed, "yade": part_yade,
-         "error": part_error}
+         "error": part_error, "pit": part_pit}
+EVERY = ("scaling", "fall1500", "fixed", "yade", "error")  # pit on demand: its cut alone takes a minute
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
-    parts = argv or list(PARTS)
+    parts = argv or list(EVERY)
     bad = [p for p in parts if p not in PARTS]
     if bad:
         print(f"unknown part {bad[0]!r}; choose from {', '.join(PARTS)}", file=sys.stderr)
