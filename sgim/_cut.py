@@ -149,6 +149,9 @@ def _grid_pad(M, g0, cs, dims):
 
 @njit(cache=True)
 def _disc_pass(c, rad, start, order, g0, cs, dims, M, S, R, d, rmax, out_s, out_k, out_o, pos):
+    """Count (out_* empty) or write into out_*[pos:] the spheres disc (M, S, R, d) holds; returns the count. One
+    signature for both: each specialisation costs seconds of compilation."""
+    write = out_s.shape[0] > 0
     band = d / 2.0 if d != 0.0 else 2.0 * rmax
     ext = R + band + _grid_pad(M, g0, cs, dims)
     lo3, hi3 = _box_cells(M, ext, g0, cs, dims)
@@ -168,7 +171,7 @@ def _disc_pass(c, rad, start, order, g0, cs, dims, M, S, R, d, rmax, out_s, out_
                     i = order[q]
                     k, off = _disc_test(c, rad, i, M, S, R, d)
                     if k != 0:
-                        if out_s is not None:
+                        if write:
                             out_s[pos + n] = i
                             out_k[pos + n] = k
                             out_o[pos + n] = off
@@ -177,22 +180,19 @@ def _disc_pass(c, rad, start, order, g0, cs, dims, M, S, R, d, rmax, out_s, out_
 
 
 @njit(cache=True, parallel=True)
-def count_members(c, rad, start, order, g0, cs, dims, centres, normals, radii, thick, rmax):
+def disc_members(c, rad, start, order, g0, cs, dims, centres, normals, radii, thick, rmax, offsets, out_s, out_k,
+                 out_o):
+    """The number of spheres each disc holds; with out_* not empty also the rows (sphere, kind, offset), disc k's
+    in offsets[k]:offsets[k + 1]. One kernel for the counting and the writing pass (empty arrays when counting):
+    each parallel kernel costs seconds of compilation."""
     nd = centres.shape[0]
     counts = np.zeros(nd, np.int64)
+    write = out_s.shape[0] > 0
     for k in prange(nd):
+        pos = offsets[k] if write else np.int64(0)
         counts[k] = _disc_pass(c, rad, start, order, g0, cs, dims, centres[k], normals[k], radii[k], thick[k],
-                               rmax, None, None, None, 0)
+                               rmax, out_s, out_k, out_o, pos)
     return counts
-
-
-@njit(cache=True, parallel=True)
-def fill_members(c, rad, start, order, g0, cs, dims, centres, normals, radii, thick, rmax, offsets,
-                 out_s, out_k, out_o):
-    nd = centres.shape[0]
-    for k in prange(nd):
-        _disc_pass(c, rad, start, order, g0, cs, dims, centres[k], normals[k], radii[k], thick[k], rmax,
-                   out_s, out_k, out_o, offsets[k])
 
 
 @njit(cache=True)
@@ -224,6 +224,10 @@ def colours_from_members(n, msph, mdisc, mkind, moff):
 
 @njit(cache=True)
 def _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, out_j, pos):
+    """Count (out_j empty) or write into out_j[pos:], sorted, the spheres j > i that touch sphere i; returns the
+    count. One signature for both callers (an empty column when counting, i as int64: prange hands its loops an
+    unsigned index): each specialisation costs seconds of compilation."""
+    write = out_j.shape[0] > 0
     ix = min(max(int((c[i, 0] - g0[0]) / cs), 0), dims[0] - 1)
     iy = min(max(int((c[i, 1] - g0[1]) / cs), 0), dims[1] - 1)
     iz = min(max(int((c[i, 2] - g0[2]) / cs), 0), dims[2] - 1)
@@ -241,7 +245,7 @@ def _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, out_j, pos):
                     dz = c[j, 2] - c[i, 2]
                     lim = (rad[i] + rad[j]) * (1.0 + tol)
                     if dx * dx + dy * dy + dz * dz <= lim * lim:
-                        if out_j is not None:
+                        if write:
                             # insertion keeps each row sorted by j
                             p = pos + n
                             while p > pos and out_j[p - 1] > j:
@@ -253,21 +257,21 @@ def _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, out_j, pos):
 
 
 @njit(cache=True, parallel=True)
-def count_pairs(c, rad, start, order, g0, cs, dims, tol):
+def sphere_pairs(c, rad, start, order, g0, cs, dims, tol, offsets, out):
+    """The number of touching spheres j > i of each sphere i; with `out` not empty also the pairs (i, j), sphere
+    i's in rows offsets[i]:offsets[i + 1] sorted by j. One kernel for the counting and the writing pass (empty
+    offsets and out when counting): each parallel kernel costs seconds of compilation."""
     n = c.shape[0]
     counts = np.empty(n, np.int64)
+    write = out.shape[0] > 0
     for i in prange(n):
-        counts[i] = _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, None, 0)
+        pos = offsets[i] if write else np.int64(0)
+        k = _pairs_of(np.int64(i), c, rad, start, order, g0, cs, dims, tol, out[:, 1], pos)
+        counts[i] = k
+        if write:
+            for q in range(pos, pos + k):
+                out[q, 0] = i
     return counts
-
-
-@njit(cache=True, parallel=True)
-def fill_pairs(c, rad, start, order, g0, cs, dims, tol, offsets, out):
-    n = c.shape[0]
-    for i in prange(n):
-        k = _pairs_of(i, c, rad, start, order, g0, cs, dims, tol, out[:, 1], offsets[i])
-        for q in range(offsets[i], offsets[i] + k):
-            out[q, 0] = i
 
 
 # ---------------------------------------------------------------------------

@@ -242,7 +242,9 @@ def _first_at_or_above(za, zb, c0, c1, nz, zval):
 
 @njit(cache=True)
 def _column_pass(B, x, y, steps, r, eps, tol, out, pos):
-    """Count (out is None) or write the kept sites of one column (B: Bins, steps: Steps); returns the count."""
+    """Count (`out` empty) or write into out[pos:] the kept sites of one column (B: Bins, steps: Steps); returns
+    the count. One signature for both: each specialisation costs seconds of compilation."""
+    write = out.shape[0] > 0
     pc, ec, fb, cell_start, cell_facets = B.pc, B.ec, B.fb, B.cell_start, B.cell_facets
     za, zb, c0, c1, nz = steps
     zlo, zhi, cell = _column_bounds(B, x, y, r, eps, tol)
@@ -250,7 +252,7 @@ def _column_pass(B, x, y, steps, r, eps, tol, out, pos):
     mhi = max(mlo, _first_at_or_above(za, zb, c0, c1, nz, zhi))
     n = 0
     for m in range(mlo):
-        if out is not None:
+        if write:
             out[pos + n, 0] = x
             out[pos + n, 1] = y
             out[pos + n, 2] = za + zb * (c0 + c1 * m)
@@ -267,7 +269,7 @@ def _column_pass(B, x, y, steps, r, eps, tol, out, pos):
                 removed = True
                 break
         if not removed:
-            if out is not None:
+            if write:
                 out[pos + n, 0] = x
                 out[pos + n, 1] = y
                 out[pos + n, 2] = z
@@ -276,17 +278,16 @@ def _column_pass(B, x, y, steps, r, eps, tol, out, pos):
 
 
 @njit(cache=True, parallel=True)
-def count_columns(B, cx, cy, steps, r, eps, tol):
+def column_sites(B, cx, cy, steps, r, eps, tol, offsets, out):
+    """The number of kept sites of each column; with `out` not empty also the sites, column i's in rows
+    offsets[i]:offsets[i + 1]. One kernel for the counting and the writing pass, called with the same types
+    (empty offsets and out when counting): each parallel kernel costs seconds of compilation."""
     counts = np.empty(len(cx), np.int64)
+    write = out.shape[0] > 0
     for i in prange(len(cx)):
-        counts[i] = _column_pass(B, cx[i], cy[i], steps, r, eps, tol, None, 0)
+        pos = offsets[i] if write else np.int64(0)
+        counts[i] = _column_pass(B, cx[i], cy[i], steps, r, eps, tol, out, pos)
     return counts
-
-
-@njit(cache=True, parallel=True)
-def fill_columns(B, cx, cy, steps, r, eps, tol, offsets, out):
-    for i in prange(len(cx)):
-        _column_pass(B, cx[i], cy[i], steps, r, eps, tol, out, offsets[i])
 
 
 @njit(cache=True)

@@ -76,14 +76,14 @@ def membership(centres, radii, grid: SphereGrid, discs: Discs) -> Membership:
         return Membership(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int8), np.zeros(0))
     rmax = float(radii.max())
     args = (centres, radii, *grid.args(), discs.centres, discs.normals, discs.radii, discs.thickness, rmax)
-    counts = K.count_members(*args)
+    counts = K.disc_members(*args, np.zeros(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int8), np.empty(0))
     offsets = np.zeros(len(counts) + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
     tot = int(offsets[-1])
     s = np.empty(tot, np.int64)
     k = np.empty(tot, np.int8)
     o = np.empty(tot)
-    K.fill_members(*args, offsets, s, k, o)
+    K.disc_members(*args, offsets, s, k, o)
     disc = np.repeat(np.arange(len(discs), dtype=np.int32), counts)
     # within a disc, order rows by sphere (the grid walk order is arbitrary)
     perm = np.lexsort((s, disc))
@@ -102,11 +102,11 @@ def touching_pairs(centres, radii, grid: SphereGrid, tol):
         from .rpack import contact_pairs
 
         return contact_pairs(centres, radii, tol)
-    counts = K.count_pairs(centres, radii, *grid.args(), float(tol))
+    counts = K.sphere_pairs(centres, radii, *grid.args(), float(tol), np.zeros(0, np.int64), np.empty((0, 2), np.int64))
     offsets = np.zeros(len(counts) + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
     out = np.empty((int(offsets[-1]), 2), np.int64)
-    K.fill_pairs(centres, radii, *grid.args(), float(tol), offsets, out)
+    K.sphere_pairs(centres, radii, *grid.args(), float(tol), offsets, out)
     return out, offsets
 
 

@@ -76,11 +76,11 @@ def kept_sites(lattice: Lattice, facets: FacetSet, lo, hi, progress=None):
     parts = []
     for fam in lattice.families:
         args = (bins, fam.cx, fam.cy, K.Steps(fam.za, fam.zb, fam.c0, fam.c1, fam.nz), r, eps, tol)
-        counts = K.count_columns(*args)
+        counts = K.column_sites(*args, np.zeros(0, np.int64), np.empty((0, 3)))
         offsets = np.zeros(len(counts) + 1, np.int64)
         np.cumsum(counts, out=offsets[1:])
         out = np.empty((int(offsets[-1]), 3))
-        K.fill_columns(*args, offsets, out)
+        K.column_sites(*args, offsets, out)
         parts.append(out)
         if progress:
             progress(f"family {len(parts)}/{len(lattice.families)}: {len(out)} spheres kept")
