@@ -9,9 +9,8 @@ run.prescribed), steps it run.steps times and records every run.record_steps
 steps (first record at t = 0): series ``kinetic`` (translational + rotational energy of the free spheres [J])
 and ``bonds_intact``, positions when n * records <= 5e6, and the final positions, velocities and bond states.
 The in-house engine does every feature of the run exactly (it is the reference the decks are compared with),
-so ``extra["approximations"]`` is empty; ``extra`` also holds the set-up time, the stepping CPU time (``cpu_s``,
-of all threads), the pair-list rebuilds and the threads numba steps the bonds and the integration on (all cores
-unless NUMBA_NUM_THREADS says fewer; the results do not depend on it).
+so ``extra["approximations"]`` is empty; ``extra`` also holds the set-up time, the stepping CPU time (``cpu_s``)
+and the pair-list rebuilds.
 
 The engine's cost depends on how its arrays are laid out in memory: the run is stepped with its spheres
 renumbered in a spatial order (columns of grid cells, ``spatial_order``) and its bonds sorted by their new
@@ -27,7 +26,6 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numba
 import numpy as np
 
 from sgim.common import CliError
@@ -156,7 +154,7 @@ def run_inhouse(run, out=None, progress=None, chunk_seconds=2.0) -> RunResult:
                         extra={"approximations": approximations(run), "setup_s": setup_s, "joint_walls": len(slabs),
                                "cpu_s": time.process_time() - c0,
                                "pair_list_builds": int(sim.stats[7]),
-                               "smooth_joints": int(ss.n_joints), "threads": numba.get_num_threads()})
+                               "smooth_joints": int(ss.n_joints), "threads": 1})
         if out is not None:
             res.save(Path(out))
             write_result_frames(res, out, run, progress)  # ParaView files beside the result

@@ -24,18 +24,8 @@ Motion = namedtuple("Motion", "x v w force torque")
 # bonds per sphere as CSR on the lower index (start, nbr: the partner, idx: the bond) for the pair-list build;
 # the bonds with a shear spring (full: bond indices in order) and the central bonds (ks = 0: cidx their bond
 # indices, cij their spheres with i stored as -1 - i while broken, crows C_* rows, cfn their normal force,
-# czeta their damping ratios or an empty array for undamped ones); the hash of the pair keys i * n + j.
-# The parallel bond pass (dda/_bondlaw.py): the full bonds of sphere s are full[fstart[s]:fstart[s + 1]] (``full``
-# sorted by i), those whose j is s full[fin[fin_start[s]:fin_start[s + 1]]] (ascending); the same for the
-# central bonds (cstart; cin_start, cin: positions q in the compact rows); the work arrays each step: fwork
-# (nfull, 6: force and torque of a full bond on its j), fsum (n, 6: the sums over a sphere's own full bonds of
-# their force and of a0 n x f, which the gather subtracts), cwork (ncentral, 3), csum (n, 3) alike for central
-# bonds, rel (nbonds: the spring energy a bond releases when it breaks)
-Bonds = namedtuple("Bonds", "i j rows intact brk start nbr idx full cidx cij crows cfn czeta key_tab key_slot "
-                            "fstart fin_start fin fwork fsum cstart cin_start cin cwork csum rel")
-# spheres per chunk of the parallel passes over spheres (bonds, integration): the energy sums add the chunks'
-# partial sums in chunk order, so that they do not depend on the number of threads
-SCHUNK = 2048
+# czeta their damping ratios or an empty array for undamped ones); the hash of the pair keys i * n + j
+Bonds = namedtuple("Bonds", "i j rows intact brk start nbr idx full cidx cij crows cfn czeta key_tab key_slot")
 # smooth joints (dda/_spheres.py ``_joints``): spheres i, j, joint normal, tan(phi), in contact, reference gap,
 # cumulative sliding, shear displacement, sign of the normal; the hash of their pair keys
 Joints = namedtuple("Joints", "i j nrm tan on init slide us sgn key_tab key_slot")

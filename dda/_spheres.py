@@ -30,10 +30,6 @@ dda/_coupled.py runs the same contact, joint, bond and integration kernels with 
    of central bonds costs one normal spring per bond;
 5. ``integrate``: central difference for the free spheres (viscous damping -c v of every sphere and Cundall's local damping as
    options; the work of both goes to the local damping term).
-Stages 4 and 5 and the force reset run on all of numba's threads (prange over chunks of SCHUNK spheres) with
-the same bits for any number of threads: no atomics, each sphere's force summed in one fixed order (its
-contacts and joints as listed, then its bonds as ``bond_forces`` says), the energy sums chunk by chunk in chunk
-order. The pair list, contacts and joints are serial.
 Energy = [kinetic (product form), potential, elastic (contacts, joints and bonds), friction (+ released),
 damping, local damping]; the last three cumulative.
 
@@ -49,13 +45,13 @@ matters more than its arithmetic (the spheres a bond joins lie far apart in memo
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ._bondlaw import _blank_key, _hkey, bond_forces, bond_lookup, pair_meff, sync_central
 from ._contact import point_force
 from ._sphere_state import (E_DAMPING, E_ELASTIC, E_FRICTION, E_KIN, E_LOCAL, E_POT, LAW_KN, LAW_KS, LAW_TANPHI,
-                            LAW_ZETA, SCHUNK, ST_BONDS, ST_BROKEN, ST_BUILDS, ST_CONTACTS, ST_JOINTS,
-                            ST_NEED, ST_NEED_PAIRS, ST_WALL, Motion)
+                            LAW_ZETA, ST_BONDS, ST_BROKEN, ST_BUILDS, ST_CONTACTS, ST_JOINTS, ST_NEED,
+                            ST_NEED_PAIRS, ST_WALL, Motion)
 
 OK, NEED_CAPACITY, BLOWUP, NEED_PAIRS = 0, 1, 2, 3
 
@@ -541,7 +537,7 @@ def _joints(dt, mo, sp, lawrow, jt, res):
     return nact, nret
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def integrate(mo, sp, env, dt, dt_prev, acc, x_ref):
     """Central difference of the free spheres: a kinematic sphere moves at its prescribed velocity and the work
     of the forces on it goes to acc[0]; otherwise force + gravity + body force, with viscous damping -visc v
@@ -549,64 +545,24 @@ def integrate(mo, sp, env, dt, dt_prev, acc, x_ref):
     two steps) and its position (dt). Returns (kinetic energy, potential energy, damping work, finite, the
     largest squared move since x_ref: 0 when x_ref is empty).
 
-    Both cores: prange over chunks of SCHUNK spheres (``_integrate_chunk``); the sums (energies, acc[0]) add the
-    chunks' partial sums in chunk order, the first chunk's starting where the serial sum started, so that they
-    do not depend on the number of threads (and equal the serial sum's bits for up to SCHUNK spheres)."""
-    n = mo.x.shape[0]
-    nch = (n + SCHUNK - 1) // SCHUNK
-    part = np.zeros((nch, 6))
-    dtavg = 0.5 * (dt + dt_prev)
-    a0 = acc[0]
-    for c in prange(nch):
-        s0 = c * SCHUNK
-        ke, pe, d_loc, a, ok, moved = _integrate_chunk(s0, min(n, s0 + SCHUNK), mo, sp, env, dt, dtavg, x_ref,
-                                                       a0 if c == 0 else 0.0)
-        part[c, 0] = ke
-        part[c, 1] = pe
-        part[c, 2] = d_loc
-        part[c, 3] = a
-        part[c, 4] = 1.0 if ok else 0.0
-        part[c, 5] = moved
-    ke = 0.0
-    pe = 0.0
-    d_loc = 0.0
-    acc_sum = 0.0
-    ok = True
-    moved = 0.0
-    for c in range(nch):
-        ke += part[c, 0]
-        pe += part[c, 1]
-        d_loc += part[c, 2]
-        acc_sum += part[c, 3]
-        ok = ok and part[c, 4] == 1.0
-        moved = max(moved, part[c, 5])
-    acc[0] = acc_sum
-    return ke, pe, d_loc, ok, moved
-
-
-@njit(cache=True)
-def _integrate_chunk(s0, s1, mo, sp, env, dt, dtavg, x_ref, acc0):
-    """``integrate`` for the spheres s0:s1: returns their (kinetic energy, potential energy, damping work, acc0
-    less the work of the kinematic spheres, finite, largest squared move).
-
     One loop over plain arrays taken from the bundles once: a bundle's field read inside the loop (or a helper
     taking the bundles per sphere) costs reference counts per sphere, which made this kernel 6 x slower."""
     X, V, W, force, torque = mo.x, mo.v, mo.w, mo.force, mo.torque
     m, inertia, bforce, fixed, kin = sp.m, sp.inertia, sp.bforce, sp.fixed, sp.kin
     gravity, visc, local_damp = env.gravity, env.visc, env.local_damp
+    dtavg = 0.5 * (dt + dt_prev)
     track = x_ref.shape[0] > 0
     ke = 0.0
     pe = 0.0
     d_loc = 0.0
-    acc = acc0
     ok = True
     moved = 0.0
-    for i in range(s0, s1):
+    for i in range(X.shape[0]):
         if fixed[i]:
             continue
         if kin[i]:
-            acc -= dt * (force[i, 0] * V[i, 0] + force[i, 1] * V[i, 1] + force[i, 2] * V[i, 2]
-                         + torque[i, 0] * W[i, 0] + torque[i, 1] * W[i, 1] + torque[i, 2] * W[i, 2])
+            acc[0] -= dt * (force[i, 0] * V[i, 0] + force[i, 1] * V[i, 1] + force[i, 2] * V[i, 2]
+                            + torque[i, 0] * W[i, 0] + torque[i, 1] * W[i, 1] + torque[i, 2] * W[i, 2])
             for a in range(3):
                 X[i, a] += dt * V[i, a]
         else:
@@ -640,7 +596,7 @@ def _integrate_chunk(s0, s1, mo, sp, env, dt, dtavg, x_ref, acc0):
             e1 = X[i, 1] - x_ref[i, 1]
             e2 = X[i, 2] - x_ref[i, 2]
             moved = max(moved, e0 * e0 + e1 * e1 + e2 * e2)
-    return ke, pe, d_loc, acc, ok, moved
+    return ke, pe, d_loc, ok, moved
 
 
 @njit(cache=True, inline="always")
@@ -654,13 +610,12 @@ def book_energy(energy, acc, ke, pe, d_loc, res, e_bond):
     energy[E_LOCAL] += d_loc
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def clear_forces(mo):
-    force, torque = mo.force, mo.torque
-    for i in prange(force.shape[0]):
+    for i in range(mo.force.shape[0]):
         for a in range(3):
-            force[i, a] = 0.0
-            torque[i, a] = 0.0
+            mo.force[i, a] = 0.0
+            mo.torque[i, a] = 0.0
 
 
 @njit(cache=True)

@@ -368,7 +368,19 @@ class SphereSimulation:
         self.bond_us = self.bond_rows[:, 6:9]
         self.bond_intact = np.ones(ss.n_bonds, bool)
         self.bond_fn = self.bond_rows[:, 9]
-        self.bond_layout()
+        # central bonds (ks = 0): their own compact rows (dda/_spheres.py); bond_fn gets their normal force back
+        # after each call
+        central = ss.bond_ks == 0.0
+        self.bond_full = np.flatnonzero(~central).astype(np.int64)
+        self.cbond_idx = np.flatnonzero(central).astype(np.int64)
+        self.cbond_ij = np.ascontiguousarray(np.c_[ss.bond_i[central], ss.bond_j[central]].astype(np.int32))
+        self.cbond_rows = np.zeros((len(self.cbond_idx), 3))
+        self.cbond_fn = np.zeros(len(self.cbond_idx))
+        self.cbond_rows[:, 0] = ss.bond_len0[central]
+        self.cbond_rows[:, 1] = ss.bond_kn[central]
+        self.cbond_rows[:, 2] = ss.bond_ft[central]
+        zc = ss.bond_zeta[central]
+        self.cbond_zeta = np.ascontiguousarray(zc, float) if np.any(zc > 0) else np.zeros(0)
         self.sphere_rows = (_aligned_rows(n, 8), _aligned_rows(n, 8), _aligned_rows(n, 4, 32))
         self.bond_break_time = np.full(ss.n_bonds, -1.0)
         self.bkey_tab, self.bkey_slot = build_bond_hash(ss.bond_i, ss.bond_j, n)
@@ -403,40 +415,6 @@ class SphereSimulation:
         self.energy = np.zeros(NENERGY)
         self.acc = np.zeros(1)
         self.stats = np.zeros(8)
-
-    def bond_layout(self, keep=None):
-        """The bond lists of the kernels (dda/_sphere_state.py ``Bonds``) for the bonds `keep` (bool per bond,
-        default all; a benchmark leaves bonds out with it): the full bonds (``bond_full``) and the central ones
-        (ks = 0: compact rows ``cbond_*``; bond_fn gets their normal force back after each call), each list
-        sorted by its first sphere i (stable: a bond list sorted by i keeps its order), the lists per sphere of
-        the parallel pass (bonds of i, bonds of j) and its work arrays."""
-        ss = self.spheres
-        n = ss.n
-        keep = np.ones(ss.n_bonds, bool) if keep is None else np.asarray(keep, bool)
-        central = ss.bond_ks == 0.0
-
-        def by_i(sel):
-            k = np.flatnonzero(sel)
-            k = k[np.argsort(ss.bond_i[k], kind="stable")].astype(np.int64)
-            start = np.searchsorted(ss.bond_i[k], np.arange(n + 1)).astype(np.int64)
-            order = np.argsort(ss.bond_j[k], kind="stable")  # positions by j, ascending within each j
-            in_start = np.searchsorted(ss.bond_j[k][order], np.arange(n + 1)).astype(np.int64)
-            return k, start, in_start, np.ascontiguousarray(order, np.int32)
-
-        self.bond_full, self.bond_fstart, self.bond_fin_start, self.bond_fin = by_i(~central & keep)
-        self.cbond_idx, self.bond_cstart, self.bond_cin_start, self.bond_cin = by_i(central & keep)
-        c = self.cbond_idx
-        self.cbond_ij = np.ascontiguousarray(np.c_[ss.bond_i[c], ss.bond_j[c]].astype(np.int32))
-        self.cbond_rows = np.ascontiguousarray(np.c_[ss.bond_len0[c], ss.bond_kn[c], ss.bond_ft[c]], float)
-        self.cbond_rows = self.cbond_rows.reshape(-1, 3)
-        self.cbond_fn = np.zeros(len(c))
-        zc = ss.bond_zeta[c]
-        self.cbond_zeta = np.ascontiguousarray(zc, float) if np.any(zc > 0) else np.zeros(0)
-        self.bond_fwork = np.zeros((len(self.bond_full), 6))
-        self.bond_fsum = np.zeros((n if len(self.bond_full) else 0, 6))
-        self.bond_cwork = np.zeros((len(c), 3))
-        self.bond_csum = np.zeros((n if len(c) else 0, 3))
-        self.bond_rel = np.zeros(ss.n_bonds)
 
     def _init_coupled(self, system, wall_law, block_law, pair_laws, dt, safety):
         """Spheres with moving blocks: a block Simulation stepped inside the coupled loop (dda/_coupled.py)."""
@@ -586,9 +564,7 @@ class SphereSimulation:
         env = Env(self.gravity, self.local_damping, self.viscous_damping, self.lawrow)
         bonds = Bonds(ss.bond_i, ss.bond_j, self.bond_rows, self.bond_intact, self.bond_break_time, self.bond_start,
                       self.bond_nbr, self.bond_idx, self.bond_full, self.cbond_idx, self.cbond_ij, self.cbond_rows,
-                      self.cbond_fn, self.cbond_zeta, self.bkey_tab, self.bkey_slot, self.bond_fstart,
-                      self.bond_fin_start, self.bond_fin, self.bond_fwork, self.bond_fsum, self.bond_cstart,
-                      self.bond_cin_start, self.bond_cin, self.bond_cwork, self.bond_csum, self.bond_rel)
+                      self.cbond_fn, self.cbond_zeta, self.bkey_tab, self.bkey_slot)
         joints = Joints(self.joint_i, self.joint_j, self.joint_normal, self.joint_tanphi, self.joint_on,
                         self.joint_init, self.joint_slide, self.joint_us, self.joint_sign, self.jkey_tab,
                         self.jkey_slot)

@@ -3,10 +3,9 @@ and the tests that need both cores to themselves are marked ``serial``.
 
 ``./go test`` without arguments runs the suite in two parts: ``-n 2 -m "not serial"`` (pytest-xdist, one worker
 per core), then ``-m serial`` alone. Serial are the modules that start two processes of their own (mpirun -n 2,
-LIGGGHTS on two ranks, the fuzz test's two workers, the portability test's compiles, the sphere engine on two
-numba threads) or assert a wall-clock limit (a time limit that must cut a run, a real process that must refuse
-within seconds): beside another worker, MPI ranks that poll for messages wait for a core, and a wall-clock
-bound measures the neighbour.
+LIGGGHTS on two ranks, the fuzz test's two workers, the portability test's compiles) or assert a wall-clock
+limit (a time limit that must cut a run, a real process that must refuse within seconds): beside another
+worker, MPI ranks that poll for messages wait for a core, and a wall-clock bound measures the neighbour.
 """
 from __future__ import annotations
 
@@ -20,8 +19,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 WHOLE_SUITE = 200  # tests collected: below this (one file, -k), the tests compile what they need themselves
 SERIAL = {"test_study", "test_fuzz", "test_portability", "test_adapters_liggghts", "test_corrupt_files",
-          "test_adapters_cli", "test_adapters_yade", "test_crossval", "test_liggghts_walls", "test_limits",
-          "test_dda_sphere_threads"}
+          "test_adapters_cli", "test_adapters_yade", "test_crossval", "test_liggghts_walls", "test_limits"}
 
 
 def pytest_configure(config):

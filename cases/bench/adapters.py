@@ -99,6 +99,7 @@ def inhouse_split(run, steps):
     from adapters.inhouse import reordered, spatial_order
 
     local, _ = reordered(run, spatial_order(run.centers, run.radii))
+    none = np.zeros(0, np.int64)
     t = {"total": [], "no_bonds": [], "no_bonds_no_contacts": []}
     for _ in range(3):
         for mode in t:
@@ -106,7 +107,7 @@ def inhouse_split(run, steps):
             sim.run(sim.dt)
             npair = int(sim.nl_n[0])
             if mode != "total":
-                sim.bond_layout(keep=np.zeros(sim.spheres.n_bonds, bool))
+                sim.bond_full, sim.cbond_idx = none, none
             if mode == "no_bonds_no_contacts":
                 sim.nl_n[0] = 0
             t0 = time.perf_counter()
