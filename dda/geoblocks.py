@@ -352,7 +352,8 @@ def _excavations(pool, scene, sources, stats):
 
 
 def _cavities(pool, scene, sources, walls):
-    """Carve every cavity; (cavity, wall source, cap source) of each into ``walls`` for ``_cavity_walls``."""
+    """Carve every cavity; (cavity, wall source, cap source) of each into ``walls``, for label_walls once the
+    model is cut through."""
     for cv in getattr(scene, "cavities", []):
         cav = CavityCut(cv.mesh, cv.name)
         sources.append(Source(cv.name, EXCAVATION, "surface"))

@@ -208,11 +208,11 @@ class Simulation:
         self.pair_tests = 0
 
     # ------------------------------------------------------------------
-    def critical_dt(self):
-        """2 / omega_max for the stiffest contact on the lightest moving block (translation and rotation)."""
+    def block_dts(self):
+        """(dt_t, dt_r) of each free block (sim.free's order): 2 / omega for the stiffest contact springs on it in
+        translation and in rotation (NPOINT springs at its farthest vertex about its smallest principal axis),
+        shortened by the viscous damping."""
         A = self.A
-        if len(self.free) == 0:
-            return 1.0
         k = NPOINT * float(self.lawtab[:, :, LAW_KN].max())
         m = A.mass[self.free]
         imin = A.inertia[self.free].min(1)
@@ -223,6 +223,15 @@ class Simulation:
         zr = zeta * np.sqrt(m * r * r / imin)
         dt_t = 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + zeta * zeta) - zeta)
         dt_r = 2.0 / np.sqrt(k * r * r / imin) * (np.sqrt(1.0 + zr * zr) - zr)
+        return dt_t, dt_r
+
+    def critical_dt(self):
+        """2 / omega_max for the stiffest contact on the lightest moving block (translation and rotation)."""
+        if len(self.free) == 0:
+            return 1.0
+        k = NPOINT * float(self.lawtab[:, :, LAW_KN].max())
+        zeta = float(self.lawtab[:, :, LAW_ZETA].max())
+        dt_t, dt_r = self.block_dts()
         dt_c = float(min(dt_t.min(), dt_r.min()))
         for i in np.nonzero(self.dof12)[0]:
             # all 12 modes of the block with the contact springs at its farthest vertex

@@ -305,7 +305,7 @@ def test_cemented_hanging_blocks_sleep_and_wake_with_their_bonds_and_closed_bala
     p = sim.pos[[up, lo]].copy()
     res.append(sim.run(0.05, record_every=sim.dt))
     assert np.array_equal(sim.pos[[up, lo]], p)
-    err = np.concatenate([np.asarray(r.energy)[1:, 7] for r in res])
+    err = np.concatenate([r.energy_column("balance_error")[1:] for r in res])
     elastic = res[-1].energy_column("elastic")[-1]  # 1/2 (2W) d_up + 1/2 W (d_lo - d_up): 0.33 J
     assert elastic == pytest.approx(0.5 * (2 * W) * d[up] + 0.5 * W * (d[lo] - d[up]), rel=0.05)
     assert np.abs(err).max() < 0.02 * elastic, np.abs(err).max()

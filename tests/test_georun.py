@@ -274,17 +274,17 @@ def test_tunnel_key_block_falls_from_the_crown_and_the_rock_around_it_stays(tunn
     assert np.abs(d[free & ~key]).max() < 1e-3, d[free & ~key]
 
 
-def bridge_data(cohesion, phi=20.0, share=0.5, R=1000.0):
+def bridge_data(cohesion, phi=20.0, share=0.5, R=1000.0, tensile=0.0):
     """slope_data with the joint a disc of radius R whose rim crosses the sliding block's joint face at `share` of
     its length from the toe: the disc covers the down-dip part (joint), the up-dip part is a rock bridge (intact
-    rock with `cohesion`, no tensile strength; the intact rock's friction is the joint's, phi). Returns (data, disc
-    centre, in-plane unit vector down the dip)."""
+    rock with `cohesion` and `tensile` strength; the intact rock's friction is the joint's, phi). Returns (data,
+    disc centre, in-plane unit vector down the dip)."""
     zf = 16 - math.tan(math.radians(BETA)) * (XD - 12)
     toe = np.array([XD, 2.0, zf])
     top = np.array([XD - (16 - zf) / math.tan(math.radians(PSI)), 2.0, 16.0])
     down = np.array([math.cos(math.radians(PSI)), 0.0, -math.sin(math.radians(PSI))])
     centre = toe + share * (top - toe) + R * down
-    return slope_data(phi, radius=R, centre=centre.tolist(), cohesion=cohesion, tensile=0.0), centre, down
+    return slope_data(phi, radius=R, centre=centre.tolist(), cohesion=cohesion, tensile=tensile), centre, down
 
 
 def area_outside_disc(poly, normal, centre, R, n=2000):
@@ -297,15 +297,11 @@ def area_outside_disc(poly, normal, centre, R, n=2000):
     lo, hi = uv.min(0), uv.max(0)
     h = (hi - lo) / n
     u, v = np.meshgrid(lo[0] + h[0] * (np.arange(n) + 0.5), lo[1] + h[1] * (np.arange(n) + 0.5), indexing="ij")
+    turn = np.sign(sum(uv[k - 1, 0] * uv[k, 1] - uv[k, 0] * uv[k - 1, 1] for k in range(len(uv))))  # the loop's way
     inside = np.ones(u.shape, bool)
-    for k in range(len(uv)):  # left of every edge of the counter-clockwise loop (as seen along the normal)
+    for k in range(len(uv)):  # on the inner side of every edge
         a, b = uv[k - 1], uv[k]
-        inside &= (b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0]) >= 0.0
-    if not inside.any():  # the loop runs clockwise
-        inside = np.ones(u.shape, bool)
-        for k in range(len(uv)):
-            a, b = uv[k - 1], uv[k]
-            inside &= (b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0]) <= 0.0
+        inside &= turn * ((b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0])) >= 0.0
     p = poly[0] + u[..., None] * e1 + v[..., None] * e2 - centre
     radial = p - (p @ normal)[..., None] * normal
     outside = np.einsum("...i,...i->...", radial, radial) > R * R
@@ -369,11 +365,7 @@ def test_point_law_follows_the_face_kind():
     joint law inside the disc and intact rock outside, decided against the disc's radius by brute force; the
     intact points are bonded at the start."""
     R = 1000.0
-    zf = 16 - math.tan(math.radians(BETA)) * (XD - 12)
-    top = np.array([XD - (16 - zf) / math.tan(math.radians(PSI)), 2.0, 16.0])
-    mid = (top + np.array([XD, 2.0, zf])) / 2
-    centre = mid + R * np.array([math.cos(math.radians(PSI)), 0.0, -math.sin(math.radians(PSI))])
-    data = slope_data(15.0, radius=R, centre=centre.tolist(), cohesion=1e6, tensile=1e6)
+    data, centre, _ = bridge_data(1e6, 15.0, R=R, tensile=1e6)
     scene = scene_from_dict(data, "test.toml")
     model = build_blocks(scene)
     free = above_joint(model)

@@ -387,10 +387,7 @@ def _pit_dt(sim):
     A, free = sim.A, sim.free
     k = NPOINT * float(sim.lawtab[:, :, LAW_KN].max())
     z = float(sim.lawtab[:, :, LAW_ZETA].max())
-    m, imin, r = A.mass[free], A.inertia[free].min(1), A.radius[free]
-    zr = z * np.sqrt(m * r * r / imin)
-    dt_t = sim.safety * 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + z * z) - z)
-    dt_r = sim.safety * 2.0 / np.sqrt(k * r * r / imin) * (np.sqrt(1.0 + zr * zr) - zr)
+    dt_t, dt_r = (sim.safety * d for d in sim.block_dts())
     lam = np.empty(len(free))
     thick = np.empty(len(free))
     for q, i in enumerate(free):
