@@ -42,7 +42,8 @@ The time step then also resolves the fastest strain mode. Deformable blocks neve
 
 Time step: ``dt=None`` takes ``safety * 2 / omega_max`` with omega_max from the stiffest contact (NPOINT
 points of the largest kn in parallel: a block held between two faces) on the smallest moving mass, and for rotation from the same springs at
-the largest vertex radius on the smallest principal moment of inertia.
+the block's worst vertex (``rotation_bound``: the largest eigenvalue of the vertex's point inertia against the block's, so a long thin
+block is not held to its length over its smallest moment of inertia).
 """
 from __future__ import annotations
 
@@ -65,6 +66,43 @@ from ._kinds import no_kinds
 from .progress import tracker
 from .results import Results
 from .system import quat_to_matrix
+
+
+def rotation_bound(vloc, vert_start, inertia, radius, which):
+    """Per block of `which`: an upper bound of omega^2 / k for a spring of stiffness k acting anywhere on the
+    block in rotation, the largest over its vertices r (body frame, principal axes) of the largest eigenvalue of
+    I^-1/2 (|r|^2 E - r r^T) I^-1/2 (the moment arm |u x r| of the spring's normal about any axis u is at most
+    the distance of the point from that axis, largest at a vertex). The eigenvalue, of diag(d) - w w^T with
+    d = |r|^2 / I, w = r / sqrt(I), is the secular equation's root in [d_2, d_1], bisected to its upper end
+    with correctly rounded arithmetic only (the same bits on every CPU). It is never above the older bound
+    r_max^2 / I_min, which it keeps where it gives no gain (cubes, spheres of inertia), and it is much lower for
+    needles and slabs: a long thin block turning about its length has small inertia but short arms."""
+    which = np.asarray(which, np.int64)
+    old = radius[which] ** 2 / inertia[which].min(1)
+    if len(which) == 0:
+        return old
+    cnt = vert_start[which + 1] - vert_start[which]
+    idx = np.repeat(vert_start[which] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+    r = vloc[idx]
+    ii = inertia[np.repeat(which, cnt)]
+    r2 = r[:, 0] * r[:, 0] + r[:, 1] * r[:, 1] + r[:, 2] * r[:, 2]
+    d = r2[:, None] / ii
+    w2 = r * r / ii
+    order = np.argsort(-d, axis=1, kind="stable")
+    d = np.take_along_axis(d, order, 1)
+    w2 = np.take_along_axis(w2, order, 1)
+    lo, hi = d[:, 1].copy(), d[:, 0].copy()
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        g = np.zeros_like(mid)
+        for a in range(3):
+            den = d[:, a] - mid
+            g = g + np.where(den != 0.0, w2[:, a] / np.where(den != 0.0, den, 1.0), -np.inf)
+        above = g > 1.0  # g rises on (d_2, d_1): the root lies below mid
+        hi = np.where(above, mid, hi)
+        lo = np.where(above, lo, mid)
+    lam = np.maximum.reduceat(hi, np.cumsum(cnt) - cnt)
+    return np.where(lam < old * (1.0 - 1e-9), lam, old)
 
 
 def _strain_tensor(e):
@@ -210,19 +248,19 @@ class Simulation:
     # ------------------------------------------------------------------
     def block_dts(self):
         """(dt_t, dt_r) of each free block (sim.free's order): 2 / omega for the stiffest contact springs on it in
-        translation and in rotation (NPOINT springs at its farthest vertex about its smallest principal axis),
-        shortened by the viscous damping."""
+        translation and in rotation (NPOINT springs at its worst vertex, rotation_bound), shortened by the viscous
+        damping."""
         A = self.A
         k = NPOINT * float(self.lawtab[:, :, LAW_KN].max())
         m = A.mass[self.free]
-        imin = A.inertia[self.free].min(1)
-        r = A.radius[self.free]
+        lam = rotation_bound(A.vloc, A.vert_start, A.inertia, A.radius, self.free)
         zeta = float(self.lawtab[:, :, LAW_ZETA].max())
         # viscous damping shortens the stable step: dt < 2 / w (sqrt(1 + z^2) - z). The point dampers are
-        # sized on the translational mass, so a rotational mode sees the ratio z sqrt(m r^2 / I).
-        zr = zeta * np.sqrt(m * r * r / imin)
+        # sized on the translational mass (c / k = 2 zeta sqrt(m / k)), so the rotational mode w^2 = k lam sees
+        # the ratio z sqrt(m lam).
+        zr = zeta * np.sqrt(m * lam)
         dt_t = 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + zeta * zeta) - zeta)
-        dt_r = 2.0 / np.sqrt(k * r * r / imin) * (np.sqrt(1.0 + zr * zr) - zr)
+        dt_r = 2.0 / np.sqrt(k * lam) * (np.sqrt(1.0 + zr * zr) - zr)
         return dt_t, dt_r
 
     def critical_dt(self):

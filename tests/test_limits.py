@@ -387,7 +387,7 @@ def test_scene_max_steps_keys(tmp_path, capsys):
 
 def test_every_dda_scene_of_cases_is_within_the_default_step_limit():
     """The DDA scenes of cases/ (blocks and spheres, the crossval and study scenes too) pass the default limit
-    with a margin of over 100 (the longest, dda_toppling, takes 3.6e5 steps)."""
+    with a margin of over 100 (the longest, dda_toppling, takes 1.4e5 steps)."""
     from dda.limits import DEFAULT_MAX_STEPS, run_steps
     from dda.scene import load_scene
 
@@ -400,7 +400,7 @@ def test_every_dda_scene_of_cases_is_within_the_default_step_limit():
         scene = load_scene(path)
         _, sim = scene.build_spheres() if scene.spheres else scene.build()
         worst = max(worst, run_steps(scene.duration, sim.dt))
-    assert 3e5 < worst < DEFAULT_MAX_STEPS / 100
+    assert 1e5 < worst < DEFAULT_MAX_STEPS / 100
 
 
 def test_sphere_run_with_absurd_duration_is_refused(tmp_path, capsys):
