@@ -6,7 +6,8 @@
 
 ``dda run SCENE.toml`` takes an sgim scene (a file with ``[domain]``) as it takes a DDA scene: the scene is cut
 into blocks, the blocks with a face on the domain's sides or bottom are fixed (the model's boundary, ``[blocks.run] fixed``; the top is
-the ground), and the others move under gravity with the run settings of ``[blocks.run]`` (duration required),
+the ground; with ``[blocks.run] free_within`` the blocks farther than that from the free surfaces are fixed too, the
+far field), and the others move under gravity with the run settings of ``[blocks.run]`` (duration required),
 sleeping when at rest (``[blocks.run] sleep``, default true: a resting block is neither integrated nor searched
 for contacts). The outputs are those of a DDA block run (dda/runner.py) plus ``blocks_moved`` in summary.json.
 
@@ -73,6 +74,7 @@ class GeoScene(DDAScene):
     face_src = None  # per block, its faces' sources (the model's; a hulled block's matched by plane)
     left_out = (0, 0.0)  # (blocks, m3) left out of the run: needles the engine's convexity check refuses even as hulls
     small_fixed = 0  # blocks below [blocks] min_volume held fixed (they would set the time step)
+    far_fixed = 0  # blocks fixed as the far field: farther than [blocks.run] free_within from the free surfaces
     hulled = 0  # blocks replaced by their convex hull (not convex within the engine's tolerance after snapping)
     # the keys the step limit's message names (dda/limits.py): the run settings are [blocks.run]'s, and an sgim
     # scene has no max_steps key (only --max-steps raises the limit)
@@ -160,7 +162,8 @@ class GeoScene(DDAScene):
         free = ~np.asarray(sim.A.fixed, bool)
         return {"blocks_moved": int((d[free] > moved).sum()), "moved_threshold_m": moved,
                 "fixed_blocks": int((~free).sum()), "max_displacement_m": float(d[free].max()) if free.any() else 0.0,
-                "blocks_hulled": self.hulled, "small_blocks_fixed": self.small_fixed, "blocks_left_out": self.left_out[0],
+                "blocks_hulled": self.hulled, "small_blocks_fixed": self.small_fixed,
+                "far_blocks_fixed": self.far_fixed, "blocks_left_out": self.left_out[0],
                 "volume_left_out_m3": self.left_out[1],
                 "cut": {k: v for k, v in self.model.summary().items() if k != "seconds"}}
 
@@ -175,6 +178,22 @@ def boundary_fixed(model, sides=("x-", "x+", "y-", "y+", "z-")):
             n, _ = face_planes(b)
             out[i] = bool(((n[dom] @ want.T) > 1 - 1e-9).any())
     return out
+
+
+def far_field(scene, model, names, within):
+    """Per block: True when no point of it comes within `within` of the scene's [[excavation]] and [[cavity]]
+    surfaces `names` (its bounding sphere about the vertices' centre stays farther): the far field that
+    [blocks.run] free_within fixes, as a model's boundary is fixed, so that only the rock near the free surfaces
+    moves and costs time steps."""
+    from types import SimpleNamespace
+
+    from sgim.grading import NearObjects
+
+    centre = np.array([b.v.mean(0) for b in model.blocks]).reshape(-1, 3)
+    radius = np.array([np.sqrt(((b.v - c) ** 2).sum(1).max()) for b, c in zip(model.blocks, centre)])
+    near = NearObjects(scene, SimpleNamespace(near=list(names)))
+    dist = near.distance(centre, float(within + radius.max()) * 1.01 + 1.0)
+    return dist - radius > within
 
 
 def _snap_convex(spec, rel=3e-10, rounds=60):
@@ -228,7 +247,10 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
     # blocks below [blocks] min_volume that no neighbour could take (pieces of the exact excavation, down to
     # 1e-5 m3 in the open pit) would set the time step (1e-9 s in the open pit): they stay fixed, and are counted
     small = (model.volumes() < spec.min_volume) & ~fix if fixed is None else np.zeros(len(fix), bool)
-    fix = fix | small
+    far = np.zeros(len(fix), bool)
+    if fixed is None and run.get("free_within") is not None:
+        far = far_field(scene, model, run["free_near"], run["free_within"]) & ~fix & ~small
+    fix = fix | small | far
     specs = model.specs()
     face_src = [b.src for b in model.blocks]
     hulled, left_out = 0, []
@@ -259,6 +281,7 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
     gs.model, gs.spec, gs.face_src, gs.hulled = model, spec, face_src, hulled
     gs.left_out = (len(left_out), lost if left_out else 0.0)
     gs.small_fixed = int(small.sum())
+    gs.far_fixed = int(far.sum())
     return gs
 
 
@@ -270,4 +293,4 @@ def load_geo_scene(path, progress=None) -> GeoScene:
     return geo_scene(scene, progress=say, path=path)
 
 
-__all__ = ["GeoScene", "INTACT_ROW", "boundary_fixed", "geo_scene", "is_sgim_scene", "load_geo_scene"]
+__all__ = ["GeoScene", "INTACT_ROW", "boundary_fixed", "far_field", "geo_scene", "is_sgim_scene", "load_geo_scene"]

@@ -33,6 +33,8 @@ builder ignores the sphere keys ([packing], [bonds], [render], ...).
     record_every = 0.02              # s (default duration / 100)
     sleep = true                     # resting blocks stop being integrated
     fixed = ["x-", "x+", "y-", "y+", "z-"]   # blocks with a face on these domain faces are fixed (the default)
+    free_within = 20.0               # m: only blocks that come this near the free surfaces move, the far field is
+    free_near = ["pit"]              #   fixed; the [[excavation]] / [[cavity]] names (default all of them)
 
     [[blocks.joint_set]]             # a persistent joint set of the block fabric
     name = "B1"
@@ -79,7 +81,8 @@ DEFAULTS = {
 BLOCK_KEYS = {"min_volume", "cut_by", "cohesion", "tensile", "friction", "seed", "joint_set"}
 BLOCK_KEYS |= {"kn", "ks", "damping", "density", "joint_friction", "joint_cohesion", "joint_tensile", "law", "run"}
 LAW_KEYS = {"name", "friction", "cohesion", "tensile", "kn", "ks"}
-RUN_KEYS = {"duration", "dt", "safety", "gravity", "local_damping", "frames", "record_every", "sleep", "fixed"}
+RUN_KEYS = {"duration", "dt", "safety", "gravity", "local_damping", "frames", "record_every", "sleep", "fixed",
+            "free_within", "free_near"}
 SIDES = ("x-", "x+", "y-", "y+", "z-", "z+")  # the domain's faces, by the axis and side of their outward normal
 STIFF = {"lo": 1e-20, "hi": 1e40, "unit": " N/m"}
 SET_KEYS = {"name", "dip", "dip_direction", "spacing", "origin", "persistence", "extent"}
@@ -202,7 +205,7 @@ def read_blocks(rd, data, scene):
         rd.number(bt, "joint_tensile", "blocks.joint_tensile", default=DEFAULTS["blocks.joint_tensile"],
                   nonneg=True, **STRESS))
     spec.laws = _read_laws(rd, bt, spec)
-    spec.run = _read_run(rd, bt)
+    spec.run = _read_run(rd, bt, scene)
     sets = bt.get("joint_set", [])
     if not isinstance(sets, list):
         rd.err("blocks.joint_set", sets, "must be an array of tables ([[blocks.joint_set]])")
@@ -249,10 +252,11 @@ def default_run():
     d = DEFAULTS
     return {"duration": None, "dt": None, "safety": d["blocks.run.safety"], "gravity": np.array(d["blocks.run.gravity"]),
             "local_damping": d["blocks.run.local_damping"], "frames": d["blocks.run.frames"],
-            "sleep": d["blocks.run.sleep"], "record_every": None, "fixed": list(d["blocks.run.fixed"])}
+            "sleep": d["blocks.run.sleep"], "record_every": None, "fixed": list(d["blocks.run.fixed"]),
+            "free_within": None, "free_near": None}
 
 
-def _read_run(rd, bt):
+def _read_run(rd, bt, scene):
     rt = rd.table(bt, "run", "blocks.run")
     rd.known(rt, RUN_KEYS, "blocks.run")
     d = DEFAULTS
@@ -269,6 +273,21 @@ def _read_run(rd, bt):
     run["fixed"] = rd.value(rt, "fixed", "blocks.run.fixed", list(d["blocks.run.fixed"]), "list of strings")
     if not isinstance(run["fixed"], list) or any(f not in SIDES for f in run["fixed"]):
         rd.err("blocks.run.fixed", run["fixed"], f"must be a list drawn from {', '.join(SIDES)} (domain faces)")
+    run["free_within"], run["free_near"] = None, None
+    if "free_within" in rt:
+        run["free_within"] = rd.number(rt, "free_within", "blocks.run.free_within", positive=True, hi=MAX_COORD,
+                                       unit=" m")
+        surfaces = [o.name for o in scene.excavations] + [o.name for o in getattr(scene, "cavities", [])]
+        near = rd.value(rt, "free_near", "blocks.run.free_near", surfaces, "list of strings")
+        if not isinstance(near, list) or not near or any(not isinstance(x, str) for x in near):
+            rd.err("blocks.run.free_near", near, "must be a non-empty list of [[excavation]] or [[cavity]] names")
+        for i, x in enumerate(near):
+            if x not in surfaces:
+                rd.err(f"blocks.run.free_near[{i}]", x, "names no [[excavation]] or [[cavity]] of the scene (known: "
+                       + (", ".join(surfaces) or "none") + ")")
+        run["free_near"] = near
+    elif "free_near" in rt:
+        rd.err("blocks.run.free_near", rt["free_near"], "needs blocks.run.free_within (the distance, m)")
     run["record_every"] = None
     if "record_every" in rt:
         run["record_every"] = rd.number(rt, "record_every", "blocks.run.record_every", positive=True, unit=" s")

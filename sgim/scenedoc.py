@@ -337,6 +337,10 @@ SGIM_KEYS = {
     "blocks.run.record_every": K("s", "time between recorded rows", default="duration / 100"),
     "blocks.run.sleep": K("", "resting blocks stop being integrated until a moving block touches them"),
     "blocks.run.fixed": K("", "domain faces (x-, x+, y-, y+, z-, z+) whose blocks are fixed"),
+    "blocks.run.free_within": K("m", "only blocks whose bounding sphere comes this near the free_near surfaces "
+                                     "move; the others are fixed (the far field)", absent="every block may move"),
+    "blocks.run.free_near": K("", "[[excavation]] and [[cavity]] names that free_within measures from",
+                              default="every [[excavation]] and [[cavity]] name"),
     "blocks.joint_set": K("", "[[blocks.joint_set]]: a persistent joint set of the block fabric"),
     "blocks.joint_set[].name": K("", "set name (the faces' source)", default='"B1", "B2", ... by position'),
     "blocks.joint_set[].dip": K("deg", "dip of the planes"),
@@ -432,12 +436,14 @@ def sgim_scenes():
                    "joint_cohesion": 1e3, "joint_tensile": 1e3,
                    "law": [{"name": "J", "friction": 25.0, "cohesion": 0.0, "tensile": 0.0, "kn": 2e9, "ks": 1e9}],
                    "run": {"duration": 1.0, "dt": 1e-4, "safety": 0.4, "gravity": [0, 0, -9.8], "local_damping": 0.1,
-                           "frames": 5, "record_every": 0.1, "sleep": False, "fixed": ["z-"]},
+                           "frames": 5, "record_every": 0.1, "sleep": False, "fixed": ["z-"],
+                           "free_within": 3.0},
                    "joint_set": [{"name": "B1", "dip": 80, "dip_direction": 130, "spacing": 2.0,
                                   "origin": [1, 1, 1], "persistence": 0.8,
                                   "extent": {"min": [0, 0, 0], "max": [10, 10, 6]}}]},
     }
     cav = copy.deepcopy(base) | {
+        "blocks": {"run": {"duration": 1.0, "free_within": 2.0, "free_near": ["T"]}},
         "cavity": [{"name": "T", "shape": "circular_tunnel", "path": [[0, 5, 5], [10, 5, 5]], "radius": 1.0,
                     "segments": 8},
                    {"shape": "horseshoe_tunnel", "path": [[0, 3, 3], [10, 3, 3]], "width": 2.0, "height": 2.0,

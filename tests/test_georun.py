@@ -407,6 +407,54 @@ def test_dda_run_cli_on_an_sgim_scene(tmp_path):
     assert r.returncode == 2 and "blocks.run.duration" in r.stderr and not (tmp_path / "o2").exists()
 
 
+def test_far_field_fixed_by_free_within_is_the_blocks_farther_than_that_from_the_ground():
+    # the slope scene cut by a horizontal and a vertical joint set at 2 m and 3 m: with free_within = 1.5 m, a block
+    # is fixed when its bounding sphere (about the vertices' centre) stays more than 1.5 m from the ground; brute force: the
+    # distance to the three ground rectangles (top, face, toe) in closed form, less the sphere's radius
+    data = slope_data(30.0)
+    data["blocks"]["joint_set"] = [{"name": "H", "dip": 0.0, "dip_direction": 0.0, "spacing": 2.0},
+                                   {"name": "V", "dip": 90.0, "dip_direction": 90.0, "spacing": 3.0}]
+    data["blocks"]["run"] = {"duration": 0.1, "free_within": 1.5, "fixed": ["z-"]}
+    scene = scene_from_dict(data, "test.toml")
+    model = build_blocks(scene)
+    gs = geo_scene(scene, model=model)
+    xt = 12 + 10 / math.tan(math.radians(BETA))
+    quads = [((0.0, 16.0), (12.0, 16.0)), ((12.0, 16.0), (xt, 6.0)), ((xt, 6.0), (30.0, 6.0))]
+
+    def dist(p):  # the ground is a prism along y over 0 <= y <= 4: distance in the x-z section, y inside
+        out = []
+        for (x0, z0), (x1, z1) in quads:
+            a, b = np.array([x0, z0]), np.array([x1, z1])
+            t = np.clip(np.dot(p[[0, 2]] - a, b - a) / np.dot(b - a, b - a), 0, 1)
+            dy = max(0.0, -p[1], p[1] - 4.0)
+            out.append(math.hypot(np.linalg.norm(p[[0, 2]] - a - t * (b - a)), dy))
+        return min(out)
+
+    far = []
+    bottom = []
+    for b in model.blocks:
+        c = b.v.mean(0)
+        far.append(dist(c) - np.sqrt(((b.v - c) ** 2).sum(1).max()) > 1.5)
+        bottom.append(b.v[:, 2].min() < 1e-9)
+    far, bottom = np.array(far), np.array(bottom)
+    assert 0 < (far & ~bottom).sum() < len(far) - bottom.sum()
+    assert gs.far_fixed == int((far & ~bottom).sum())
+    fixed = np.array([s.fixed for s in gs.blocks])
+    assert np.array_equal(fixed, far | bottom)
+
+
+def test_free_near_names_an_excavation_or_a_cavity(tmp_path, capsys):
+    from sgim.common import SceneError
+
+    data = slope_data(30.0)
+    data["blocks"]["run"] = {"duration": 0.1, "free_within": 3.0, "free_near": ["nothing"]}
+    with pytest.raises(SceneError, match=r"blocks\.run\.free_near\[0\].*nothing.*known: ground"):
+        scene_from_dict(data, "test.toml")
+    data["blocks"]["run"] = {"duration": 0.1, "free_near": ["ground"]}
+    with pytest.raises(SceneError, match=r"blocks\.run\.free_near.*needs blocks\.run\.free_within"):
+        scene_from_dict(data, "test.toml")
+
+
 @pytest.mark.parametrize("change,first,named", [
     (("kn = 1.0e10 ", "kn = 1e30 "), "blocks.kn = 1e+30", ("blocks.run.duration = 1.5 s is",)),
     (("duration = 1.5", "duration = 1e9"), "blocks.run.duration = 1000000000.0", ("lower blocks.kn = 1e+10",)),
