@@ -34,9 +34,9 @@ from ._kinematics import ang_vel, place_vertices, quat_matrix, turn, turned
 from ._narrow import carry_resting, hash_pairs, narrow_phase
 from ._state import (ACC_DRIVER, ACC_SLEEPING, C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE,
                      E_DAMPING, E_ELASTIC, E_FRICTION, E_KIN, E_LOCAL, E_POT, E_TURNOVER, NCOUNT, NTALLY,
-                     ST_AWAKE, ST_CONTACTS, ST_FCP_ITER, ST_MAXDEPTH, ST_NEED, ST_PAIRS, ST_POINTS, ST_SAT,
-                     ST_SLIDING, ST_STATUS, ST_STEPS, T_DAMPING, T_ELASTIC, T_FRICTION, T_KIN, T_LOCAL, T_MAXDEPTH,
-                     T_POT, T_TURNOVER, Lists, Work)
+                     ST_AWAKE, ST_BLOCK_STEPS, ST_CONTACTS, ST_FCP_ITER, ST_MAXDEPTH, ST_NEED, ST_PAIRS,
+                     ST_POINTS, ST_SAT, ST_SLIDING, ST_STATUS, ST_STEPS, T_DAMPING, T_ELASTIC, T_FRICTION, T_KIN,
+                     T_LOCAL, T_MAXDEPTH, T_POT, T_TURNOVER, Lists, Work)
 
 OK, NEED_CAPACITY, BLOWUP = 0, 1, 2
 
@@ -456,6 +456,7 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
     sleep_on = sleep.par[0] > 0.0
     status = OK
     done = 0
+    block_steps = 0
     for step in range(nsteps):
         lists = move_geometry(blocks, deform, geom, grid, lists, work.static, work.R)
         lists, npair = broad_phase(geom, grid, lists, work.static)
@@ -479,6 +480,7 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
         con.n_pair[new] = count[C_NEW]
         con.cur[0] = new
         first_step = False
+        block_steps += lists.active.shape[0]
         blown = integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, lists.active, sleep, acc, work,
                           tally)
         if sleep_on:
@@ -492,4 +494,5 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
     books.stats[ST_STEPS] = done
     books.stats[ST_STATUS] = status
     books.stats[ST_FCP_ITER] = count[C_FIT]
+    books.stats[ST_BLOCK_STEPS] = block_steps
     return status, done, lists

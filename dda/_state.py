@@ -77,6 +77,7 @@ ST_SLIDING = 7      # sliding points
 ST_PAIRS = 8        # candidate pairs
 ST_SAT = 9          # separating-axis searches that improved the plane (chunk)
 ST_AWAKE = 10       # awake moving blocks
+ST_BLOCK_STEPS = 11  # block-steps integrated in the chunk (the awake blocks of each step, summed)
 NSTATS = 12
 
 # slots of one step's running sums (run_chunk's `tally`, float) and counters (`count`, integer; FIT and SAT add up

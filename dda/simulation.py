@@ -41,9 +41,10 @@ elastic energy. ``sim.set_strain(i, e)`` imposes an initial strain, ``sim.volume
 The time step then also resolves the fastest strain mode. Deformable blocks never sleep.
 
 Time step: ``dt=None`` takes ``safety * 2 / omega_max`` with omega_max from the stiffest contact (NPOINT
-points of the largest kn in parallel: a block held between two faces) on the smallest moving mass, and for rotation from the same springs at
-the block's worst vertex (``rotation_bound``: the largest eigenvalue of the vertex's point inertia against the block's, so a long thin
-block is not held to its length over its smallest moment of inertia).
+points of the largest kn in parallel: a block held between two faces) on the smallest moving mass, and for
+rotation from the same springs at the block's worst vertex (``rotation_bound``: the largest eigenvalue of the
+vertex's point inertia against the block's, so a long thin block is not held to its length over its smallest
+moment of inertia).
 """
 from __future__ import annotations
 
@@ -58,9 +59,9 @@ from . import _integrate as _it
 from ._broad import LARGE, build_grid, buckets_for, map_cells, n_cells
 from ._deform import critical_omega2, deform_geometry
 from ._fcp import MAXP
-from ._state import (ACC_SLEEPING, E_DAMPING, LAW_KN, LAW_TEN, LAW_ZETA, NENERGY, NLAW, NSTATS, ST_CONTACTS,
-                     ST_FCP_ITER, ST_NEED, ST_POINTS, Blocks, Books, Contacts, Deform, Forces, Geometry, Grid, Law,
-                     Lists, Loads, Sleep, State)
+from ._state import (ACC_SLEEPING, E_DAMPING, LAW_KN, LAW_TEN, LAW_ZETA, NENERGY, NLAW, NSTATS, ST_BLOCK_STEPS,
+                     ST_CONTACTS, ST_FCP_ITER, ST_NEED, ST_POINTS, Blocks, Books, Contacts, Deform, Forces, Geometry,
+                     Grid, Law, Lists, Loads, Sleep, State)
 from .contactlaw import ContactLaw
 from ._kinds import no_kinds
 from .progress import tracker
@@ -240,6 +241,8 @@ class Simulation:
         self.steps = 0
         self.E0 = None
         self.fcp_iterations = 0
+        self.block_steps = 0  # block-steps integrated (each step's awake moving blocks, summed)
+        self.cpu_s = 0.0  # CPU seconds spent in run()
         # energies below the moving weight over a thousandth of the median block size never count as a blow-up
         g = norm(self.gravity)
         self.energy_floor = max(1e-3 * self.d50 * g * float(A.mass[self.active].sum()), 1e-300)
@@ -352,6 +355,7 @@ class Simulation:
             self.steps += done
             self.time += done * self.dt
             self.fcp_iterations += int(self.stats[ST_FCP_ITER])
+            self.block_steps += int(self.stats[ST_BLOCK_STEPS])
             nsteps -= done
             if status == _it.NEED_CAPACITY:
                 self._grow_contacts(int(self.stats[ST_NEED]))
@@ -411,7 +415,7 @@ class Simulation:
         res = Results.empty(self)
         res.record(self)  # state before the first step (its energy is known after the first step)
         left = nsteps
-        t_wall = time.perf_counter()
+        t_wall, t_cpu = time.perf_counter(), time.process_time()
         clock = tracker(progress, self, duration)
         scale = 0.0
         first = self.E0 is None
@@ -452,6 +456,7 @@ class Simulation:
                          f"points {int(self.stats[ST_POINTS])}  KE {e[0]:.4g} J  balance error {err:.3g} J",
                          end=left == 0)
         res.wall_s = time.perf_counter() - t_wall
+        self.cpu_s += time.process_time() - t_cpu
         return res
 
     # ------------------------------------------------------------------

@@ -399,6 +399,9 @@ def test_dda_run_cli_on_an_sgim_scene(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     # the key block falls (0.2 m in 0.2 s); the other free pieces (not on the domain's x sides or bottom) rest
     assert summary["blocks_moved"] == 1 and summary["status"] == "ok"
+    # the resting pieces fall asleep and cost no integration; the falling key block is integrated at every step
+    cost = summary["cost"]
+    assert summary["steps"] <= cost["block_steps"] < 0.9 * cost["block_steps_all_awake"]
     assert (out / "blocks.pvd").is_file() and len(list((out / "frames").glob("*.vtu"))) == 3
     del data["blocks"]["run"]
     scene.write_text(_toml(data))
