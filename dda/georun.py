@@ -22,10 +22,13 @@ gives its own kn, ks.
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from sgim.blocktable import DEFAULTS as BLOCK_DEFAULTS
 from sgim.common import SceneError
+from sgim.grading import NearObjects
 from sgim.reader import read_toml
 from sgim.scene import load_scene as load_sgim_scene
 
@@ -190,10 +193,6 @@ def far_field(scene, model, names, within):
     surfaces `names` (its bounding sphere about the vertices' centre stays farther): the far field that
     [blocks.run] free_within fixes, as a model's boundary is fixed, so that only the rock near the free surfaces
     moves and costs time steps."""
-    from types import SimpleNamespace
-
-    from sgim.grading import NearObjects
-
     centre = np.array([b.v.mean(0) for b in model.blocks]).reshape(-1, 3)
     radius = np.array([np.sqrt(((b.v - c) ** 2).sum(1).max()) for b, c in zip(model.blocks, centre)])
     near = NearObjects(scene, SimpleNamespace(near=list(names)))
