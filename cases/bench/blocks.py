@@ -6,8 +6,8 @@ clipped to the domain's plan rectangle, the linear height integrated over the cl
     python -m cases.bench.blocks --only pit --runs 1
 
 Scenes: cases/scenes/open_pit_coarse.toml with a [blocks] table of three persistent sets at 10 m spacing (dip /
-dip direction 80/130, 70/220, 10/000, as cases/scenes/open_pit_blocks.toml) and min_volume 5 m3; cases/scenes/open_pit_dfn.toml (its 6114 sampled
-fractures and the fault) with min_volume 5 m3. A table on stdout, never a test. Each cut runs in a fresh
+dip direction 80/130, 70/220, 10/000, as cases/scenes/open_pit_blocks.toml) and min_volume 5 m3;
+cases/scenes/open_pit_dfn.toml (its 6114 sampled fractures and the fault) with min_volume 5 m3. A table on stdout, never a test. Each cut runs in a fresh
 process so that the peak memory (ru_maxrss) is its own; the cutting time is the median of ``--runs`` cuts (3), with
 the load average before and after them.
 """

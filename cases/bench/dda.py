@@ -376,37 +376,21 @@ def _pit_stages(sim, steps):
 
 
 def _pit_dt(sim):
-    """Why the run's dt is what it is: per free block, its own step by Simulation.critical_dt's bound (NPOINT
-    springs kn at the largest vertex radius r: translation sqrt(k / m), rotation sqrt(k r^2 / I_min)), and by a
-    bound per principal axis (each spring at the worst vertex adds kn (1/m + sum_a rho_a^2 / I_a), rho_a its
-    distance from axis a: the trace of the 6 x 6 mass-normalised stiffness, so never below the highest frequency).
-    Lines of text."""
-    from dda._state import LAW_KN, LAW_ZETA
-    from dda.simulation import NPOINT
-
+    """Why the run's dt is what it is: per free block, its own step by Simulation.block_dts (NPOINT springs kn:
+    translation sqrt(k / m), rotation at the block's worst vertex, dda.simulation.rotation_bound). A line of
+    text."""
     A, free = sim.A, sim.free
-    k = NPOINT * float(sim.lawtab[:, :, LAW_KN].max())
-    z = float(sim.lawtab[:, :, LAW_ZETA].max())
     dt_t, dt_r = (sim.safety * d for d in sim.block_dts())
-    lam = np.empty(len(free))
-    thick = np.empty(len(free))
-    for q, i in enumerate(free):
-        v = A.vloc[A.vert_start[i]:A.vert_start[i + 1]]
-        rho2 = np.stack([v[:, 1] ** 2 + v[:, 2] ** 2, v[:, 0] ** 2 + v[:, 2] ** 2, v[:, 0] ** 2 + v[:, 1] ** 2], 1)
-        lam[q] = k * (1.0 / A.mass[i] + (rho2 / A.inertia[i]).sum(1).max())
-        thick[q] = min(np.ptp(v @ n) for n in A.nloc[A.face_start[i]:A.face_start[i + 1]])
-    dt_a = sim.safety * 2.0 / np.sqrt(lam) * (np.sqrt(1.0 + z * z) - z)
     own = np.minimum(dt_t, dt_r)
     w = int(np.argmin(own))
-    a = int(np.argmin(dt_a))
-    return [f"dt {sim.dt:.3g} s ({int(round(2.0 / sim.dt))} steps for 2 s) is set by block {free[w]} "
-            f"({A.volume[free[w]]:.3g} m3, {thick[w]:.2f} m thick, {sim.size_b[free[w]]:.1f} m long): its rotation "
+    i = free[w]
+    v = A.vloc[A.vert_start[i]:A.vert_start[i + 1]]
+    thick = min(np.ptp(v @ n) for n in A.nloc[A.face_start[i]:A.face_start[i + 1]])
+    return [f"dt {sim.dt:.3g} s ({int(round(2.0 / sim.dt))} steps for 2 s) is set by block {i} "
+            f"({A.volume[i]:.3g} m3, {thick:.2f} m thick, {sim.size_b[i]:.1f} m long): its rotation "
             f"bound {dt_r[w]:.3g} s against its translation bound {dt_t[w]:.3g} s; {int((own < 1e-5).sum())} free "
-            f"blocks have their own "
-            f"step below 1e-5 s, {int((own < 1e-4).sum())} below 1e-4 s (the median {np.median(own):.3g} s)",
-            f"a bound per principal axis would give dt {dt_a[a]:.3g} s (block {free[a]}, {A.volume[free[a]]:.3g} m3, "
-            f"{thick[a]:.2f} m thick), {dt_a[a] / sim.dt:.1f} x: {int(round(2.0 / dt_a[a]))} steps for 2 s; "
-            f"block {free[w]} {dt_a[w]:.3g} s by it"]
+            f"blocks have their own step below 1e-5 s, {int((own < 1e-4).sum())} below 1e-4 s (the median "
+            f"{np.median(own):.3g} s)"]
 
 
 def part_pit(steps=5):
