@@ -35,6 +35,7 @@ from dda._state import LAW_COH, LAW_TANPHI
 from dda.geoblocks import INTACT, JOINT, build_blocks
 from dda.georun import geo_scene
 from dda.wedge import bracket_and_bisect
+from sgim.common import SceneError
 from sgim.scene import load_scene, scene_from_dict
 from engine_runs import require_engine
 
@@ -411,9 +412,9 @@ def test_dda_run_cli_on_an_sgim_scene(tmp_path):
 
 
 def test_far_field_fixed_by_free_within_is_the_blocks_farther_than_that_from_the_ground():
-    # the slope scene cut by a horizontal and a vertical joint set at 2 m and 3 m: with free_within = 1.5 m, a block
-    # is fixed when its bounding sphere (about the vertices' centre) stays more than 1.5 m from the ground; brute force: the
-    # distance to the three ground rectangles (top, face, toe) in closed form, less the sphere's radius
+    # the slope scene cut by a horizontal and a vertical joint set at 2 m and 3 m: with free_within = 1.5 m, a
+    # block is fixed when its bounding sphere (about the vertices' centre) stays more than 1.5 m from the ground;
+    # brute force: the distance to the three ground rectangles (top, face, toe) in closed form, less the radius
     data = slope_data(30.0)
     data["blocks"]["joint_set"] = [{"name": "H", "dip": 0.0, "dip_direction": 0.0, "spacing": 2.0},
                                    {"name": "V", "dip": 90.0, "dip_direction": 90.0, "spacing": 3.0}]
@@ -446,9 +447,7 @@ def test_far_field_fixed_by_free_within_is_the_blocks_farther_than_that_from_the
     assert np.array_equal(fixed, far | bottom)
 
 
-def test_free_near_names_an_excavation_or_a_cavity(tmp_path, capsys):
-    from sgim.common import SceneError
-
+def test_free_near_names_an_excavation_or_a_cavity():
     data = slope_data(30.0)
     data["blocks"]["run"] = {"duration": 0.1, "free_within": 3.0, "free_near": ["nothing"]}
     with pytest.raises(SceneError, match=r"blocks\.run\.free_near\[0\].*nothing.*known: ground"):
