@@ -402,6 +402,15 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     for q in range(k):
                         rows[q] = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
                     a_int, a_jnt = intact_share(lf, lo, p_pos, k, rows, nrm, pos, quat, face_geo, intact_row, R)
+            if lf >= 0 and slot >= 0:
+                # a cut block model: the records last step's points hand on by their feature ids are claimed first,
+                # so that near_history (a point's record by its place) never hands the same record to a second
+                # point (two points with one shear spring and no point turnover booked: energy made from nothing)
+                for q in range(k):
+                    for r in range(npt_old[slot]):
+                        if pid_old[slot, r] == p_id[q] and not matched[r]:
+                            matched[r] = True
+                            break
             for q in range(k):
                 if lf >= 0:  # the law of the face's kind at this point (joint inside its disc, intact rock outside)
                     r = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
