@@ -472,9 +472,27 @@ def _hull_block(a, b, na, da):
     return h
 
 
-def _merge_slivers(pool, min_volume, stats):
-    """Each block below min_volume joins a neighbour when their union is convex (volume kept, nothing dropped);
-    the others stay as they are (counted in summary()["small_blocks"])."""
+def _joined_by_rock(block, k, sources):
+    """True when face k of the block is intact rock throughout: an intact split, or a disc's (triangle's) face
+    that lies wholly outside its disc (triangle)."""
+    src = sources[block.src[k]]
+    if src.kind == INTACT:
+        return True
+    corners = block.v[list(block.faces[k])]
+    if src.shape == "disc":
+        rel = corners - src.centre
+        radial = rel - np.outer(rel @ src.normal, src.normal)
+        return bool((np.einsum("ij,ij->i", radial, radial) > src.radius ** 2).all())
+    if src.shape == "triangle":
+        return not _in_triangle(src.tri, corners).any()
+    return False
+
+
+def _merge_slivers(pool, min_volume, stats, sources):
+    """Each block below min_volume joins a neighbour across a face of intact rock (a piece of the same block of
+    the joint fabric) when their union is convex (volume kept, nothing dropped); never across a joint or fault
+    face, which would glue two blocks of the fabric together through the sliver's cemented faces. The others
+    stay as they are (counted in summary()["small_blocks"]; a run scales their inertia, dda/georun.py)."""
     vol = np.array([b.volume() for b in pool.blocks])
     gone, merged = set(), 0
     for i in np.argsort(vol).tolist():
@@ -489,7 +507,8 @@ def _merge_slivers(pool, min_volume, stats):
                 continue
             s = pool.blocks[j].v @ na.T - da  # b must lie on the far side of a face plane of a, touching it
             tol = 1e-7 * max(a.diag(), float(np.linalg.norm(pool.hi[j] - pool.lo[j])))
-            if not ((s >= -tol).all(0) & ((np.abs(s) <= tol).sum(0) >= 3)).any():
+            touch = np.flatnonzero((s >= -tol).all(0) & ((np.abs(s) <= tol).sum(0) >= 3))
+            if not any(_joined_by_rock(a, int(k), sources) for k in touch):
                 continue
             h = _hull_block(a, pool.blocks[j], na, da)
             if h is not None:
@@ -521,7 +540,7 @@ def build_blocks(scene, progress=None) -> BlockModel:
               ("cavities", lambda: _cavities(pool, scene, sources, walls)),
               ("discs", lambda: _discs(pool, scene, spec, sources, stats, lo, hi)),
               ("surfaces", lambda: _surface_discontinuities(pool, scene, spec, sources, stats)),
-              ("slivers", lambda: _merge_slivers(pool, spec.min_volume, stats)),
+              ("slivers", lambda: _merge_slivers(pool, spec.min_volume, stats, sources)),
               ("cavity walls", lambda: [label_walls(pool.blocks, *w) for w in walls]))
     for name, run in stages:
         t0 = time.perf_counter()

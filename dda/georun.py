@@ -35,12 +35,13 @@ from sgim.scene import load_scene as load_sgim_scene
 from .blockcut import face_planes
 from .contactlaw import ContactLaw
 from .geoblocks import DOMAIN, EXCAVATION, INTACT, build_blocks, default_spec, stage_line
+from .keyblocks import key_blocks
 from .limits import check_block_run
 from .polyhedra import PolyhedronError, check_convex
 from .shapes import GeometryError, convex_hull
 from .polyhedra import face_planes as poly_planes
 from .scene import OUTPUT_FORMATS, DDAScene, Material
-from .simulation import Simulation
+from .simulation import Simulation, block_dt_bounds
 from .system import quat_to_matrix
 
 INTACT_ROW = "law:intact"
@@ -76,7 +77,8 @@ class GeoScene(DDAScene):
     spec = None
     face_src = None  # per block, its faces' sources (the model's; a hulled block's matched by plane)
     left_out = (0, 0.0)  # (blocks, m3) left out of the run: needles the engine's convexity check refuses even as hulls
-    small_fixed = 0  # blocks below [blocks] min_volume held fixed (they would set the time step)
+    small = None  # per block: below [blocks] min_volume and free (its inertia scaled, scale_small_blocks)
+    small_scaled = (0, 1.0)  # (blocks whose inertia was scaled, the largest factor)
     far_fixed = 0  # blocks fixed as the far field: farther than [blocks.run] free_within from the free surfaces
     hulled = 0  # blocks replaced by their convex hull (not convex within the engine's tolerance after snapping)
     # the keys the step limit's message names (dda/limits.py): the run settings are [blocks.run]'s, and an sgim
@@ -145,6 +147,10 @@ class GeoScene(DDAScene):
         pair_laws = dict(self.pair_laws)
         pair_laws.update({(n, n): law for n, law in rows.items()})
         face_laws = self.face_laws(bs, bs.materials)
+        if self.small is not None and self.small.any():
+            laws = [self.law, *pair_laws.values()]
+            self.small_scaled = scale_small_blocks(bs.arrays(), self.small, max(law.kn for law in laws),
+                                                   max(law.damping for law in laws), self.gravity)
 
         def step_check(sim):
             check_block_run(self, sim, max_steps=max_steps, duration=duration)
@@ -156,24 +162,71 @@ class GeoScene(DDAScene):
         # found at the first step, so the kept gap is at least a millionth of the median block
         sim.keep_gap = max(sim.keep_gap, 1e-6 * sim.d50)
         sim.gap = max(sim.gap, 0.02 * sim.d50 + sim.keep_gap)
+        self.key = None
+
+        # faces with nothing across them: the excavations', cavities' and domain's
+        free_face = np.concatenate([[self.model.sources[k].kind in (DOMAIN, EXCAVATION) for k in src]
+                                    for src in self.face_src]) if self.face_src else np.zeros(0, bool)
+
+        def screen(s):  # the key blocks, once the first step has found the cemented contacts (dda/keyblocks.py):
+            # with the cement holding, and with it broken
+            self.key = {"cemented": key_blocks(s, free_face), "uncemented": key_blocks(s, free_face, cemented=False)}
+
+        sim.after_first_step = screen
         return bs, sim
 
     def run_summary(self, sim, moved=None):
         """blocks_moved: free blocks displaced by more than `moved` (default a hundredth of the median block);
-        the run's cost: block-steps integrated (the awake blocks of each step) against every moving block at every
-        step, and CPU time per integrated block-step."""
+        key_blocks: the clusters that could not stand at the first step (dda/keyblocks.py) with the cement holding
+        ("cemented") and with every block on its own ("uncemented"), their blocks and volume, how many of their
+        blocks moved and how many other blocks moved; the run's cost: block-steps integrated (the
+        awake blocks of each step) against every moving block at every step, and CPU time per integrated
+        block-step."""
         moved = 0.01 * sim.d50 if moved is None else moved
         d = np.linalg.norm(sim.pos - sim.pos0, axis=1)
         free = ~np.asarray(sim.A.fixed, bool)
+        key = None
+        if getattr(self, "key", None) is not None:
+            key = {}
+            for name, kb in self.key.items():
+                key[name] = kb.summary(sim.A.volume)
+                is_key = np.zeros(len(d), bool)
+                is_key[kb.blocks] = True
+                key[name]["key_blocks_moved"] = int((is_key & (d > moved)).sum())
+                key[name]["other_blocks_moved"] = int((free & ~is_key & (d > moved)).sum())
         cost = {"block_steps": sim.block_steps, "block_steps_all_awake": sim.steps * len(sim.movable),
                 "cpu_s": round(sim.cpu_s, 3),
                 "cpu_us_per_block_step": round(1e6 * sim.cpu_s / sim.block_steps, 2) if sim.block_steps else None}
-        return {"blocks_moved": int((d[free] > moved).sum()), "moved_threshold_m": moved, "cost": cost,
+        return {"blocks_moved": int((d[free] > moved).sum()), "moved_threshold_m": moved, "key_blocks": key,
+                "cost": cost,
                 "fixed_blocks": int((~free).sum()), "max_displacement_m": float(d[free].max()) if free.any() else 0.0,
-                "blocks_hulled": self.hulled, "small_blocks_fixed": self.small_fixed,
+                "blocks_hulled": self.hulled, "small_blocks_scaled": self.small_scaled[0],
+                "small_blocks_largest_scale": self.small_scaled[1],
                 "far_blocks_fixed": self.far_fixed, "blocks_left_out": self.left_out[0],
                 "volume_left_out_m3": self.left_out[1],
                 "cut": {k: v for k, v in self.model.summary().items() if k != "seconds"}}
+
+
+def scale_small_blocks(A, small, kn, zeta, gravity):
+    """Mass scaling of the small free blocks (flags `small`) of the system arrays A, in place: each block's mass
+    and inertia times f = (dt_0 / dt_i)^2, where dt_i is its own stable step (block_dt_bounds, contact springs
+    kn, damping ratio zeta) and dt_0 the smallest of the other free blocks', so that it no longer sets the time
+    step; a body force (1 - f) m g keeps its weight m g. Such a block answers forces f times more slowly (alone
+    it would fall at g / f); joined to its neighbours by intact rock it adds at most about the critical block's
+    inertia to theirs. Returns (blocks scaled, the largest factor)."""
+    small = np.asarray(small, bool)
+    free = np.flatnonzero(~np.asarray(A.fixed, bool) & ~small)
+    tiny = np.flatnonzero(small & ~np.asarray(A.fixed, bool))
+    if len(tiny) == 0 or len(free) == 0:
+        return 0, 1.0
+    dt0 = float(np.minimum(*block_dt_bounds(A, free, kn, zeta)).min())
+    dt = np.minimum(*block_dt_bounds(A, tiny, kn, zeta))
+    f = np.maximum((dt0 / dt) ** 2, 1.0)
+    g = np.asarray(gravity, float)
+    A.bforce[tiny] += (1.0 - f)[:, None] * A.mass[tiny, None] * g
+    A.mass[tiny] *= f
+    A.inertia[tiny] *= f[:, None]
+    return int((f > 1.0).sum()), float(f.max())
 
 
 def boundary_fixed(model, sides=("x-", "x+", "y-", "y+", "z-")):
@@ -248,13 +301,14 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
                                                             "block model for [blocks.run] duration (s)")
     model = model if model is not None else build_blocks(scene, progress=progress)
     fix = boundary_fixed(model, run["fixed"]) if fixed is None else np.asarray(fixed, bool)
-    # blocks below [blocks] min_volume that no neighbour could take (pieces of the exact excavation, down to
-    # 1e-5 m3 in the open pit) would set the time step (1e-9 s in the open pit): they stay fixed, and are counted
-    small = (model.volumes() < spec.min_volume) & ~fix if fixed is None else np.zeros(len(fix), bool)
     far = np.zeros(len(fix), bool)
     if fixed is None and run.get("free_within") is not None:
-        far = far_field(scene, model, run["free_near"], run["free_within"]) & ~fix & ~small
-    fix = fix | small | far
+        far = far_field(scene, model, run["free_near"], run["free_within"]) & ~fix
+    fix = fix | far
+    # blocks below [blocks] min_volume that no neighbour could take (pieces of the exact excavation, down to
+    # 1e-5 m3 in the open pit) would set the time step (1e-9 s in the open pit): their inertia is scaled up
+    # in build() (scale_small_blocks), their weight kept
+    small = (model.volumes() < spec.min_volume) & ~fix
     specs = model.specs()
     face_src = [b.src for b in model.blocks]
     hulled, left_out = 0, []
@@ -270,7 +324,7 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
     if left_out:  # said in the summary (blocks_left_out, their volume), never silently
         keep = np.setdiff1d(np.arange(len(specs)), left_out)
         lost = float(sum(model.blocks[k].volume() for k in left_out))
-        specs, face_src, fix = [specs[k] for k in keep], [face_src[k] for k in keep], fix[keep]
+        specs, face_src, fix, small = [specs[k] for k in keep], [face_src[k] for k in keep], fix[keep], small[keep]
     if fix.all():
         raise SceneError(path, "blocks.run.fixed", run["fixed"], "every block of the block model has a face on "
                                                                   "these domain faces: nothing would move")
@@ -284,7 +338,7 @@ def geo_scene(scene, model=None, progress=None, path=None, fixed=None) -> GeoSce
                   formats=OUTPUT_FORMATS, sources=["blocks"] * len(specs), sleep={"sleep": run["sleep"]})
     gs.model, gs.spec, gs.face_src, gs.hulled = model, spec, face_src, hulled
     gs.left_out = (len(left_out), lost if left_out else 0.0)
-    gs.small_fixed = int(small.sum())
+    gs.small = small
     gs.far_fixed = int(far.sum())
     return gs
 

@@ -69,6 +69,22 @@ from .results import Results
 from .system import quat_to_matrix
 
 
+def block_dt_bounds(A, which, kn, zeta):
+    """(dt_t, dt_r) of the blocks `which` of the system arrays A: 2 / omega for contact springs kn (NPOINT of
+    them) on the block in translation and in rotation (at its worst vertex, rotation_bound), shortened by the
+    viscous damping ratio zeta. Both scale as the square root of the block's density."""
+    k = NPOINT * kn
+    m = A.mass[which]
+    lam = rotation_bound(A.vloc, A.vert_start, A.inertia, A.radius, which)
+    # viscous damping shortens the stable step: dt < 2 / w (sqrt(1 + z^2) - z). The point dampers are sized on
+    # the translational mass (c / k = 2 zeta sqrt(m / k)), so the rotational mode w^2 = k lam sees the ratio
+    # z sqrt(m lam).
+    zr = zeta * np.sqrt(m * lam)
+    dt_t = 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + zeta * zeta) - zeta)
+    dt_r = 2.0 / np.sqrt(k * lam) * (np.sqrt(1.0 + zr * zr) - zr)
+    return dt_t, dt_r
+
+
 def rotation_bound(vloc, vert_start, inertia, radius, which):
     """Per block of `which`: an upper bound of omega^2 / k for a spring of stiffness k acting anywhere on the
     block in rotation, the largest over its vertices r (body frame, principal axes) of the largest eigenvalue of
@@ -181,6 +197,9 @@ class Simulation:
             raise ValueError(f"time step must be > 0 (got {dt!r})")
         if on_dt is not None:
             on_dt(self)
+        # called once, after the first step of the first run (its contacts are then found): dda/georun.py's key
+        # block screening
+        self.after_first_step = None
         self.asleep = np.zeros(nb, bool)
         self.calm = np.zeros(nb, np.int64)
         self.pe_sl = np.zeros(nb)
@@ -250,21 +269,9 @@ class Simulation:
 
     # ------------------------------------------------------------------
     def block_dts(self):
-        """(dt_t, dt_r) of each free block (sim.free's order): 2 / omega for the stiffest contact springs on it in
-        translation and in rotation (NPOINT springs at its worst vertex, rotation_bound), shortened by the viscous
-        damping."""
-        A = self.A
-        k = NPOINT * float(self.lawtab[:, :, LAW_KN].max())
-        m = A.mass[self.free]
-        lam = rotation_bound(A.vloc, A.vert_start, A.inertia, A.radius, self.free)
-        zeta = float(self.lawtab[:, :, LAW_ZETA].max())
-        # viscous damping shortens the stable step: dt < 2 / w (sqrt(1 + z^2) - z). The point dampers are
-        # sized on the translational mass (c / k = 2 zeta sqrt(m / k)), so the rotational mode w^2 = k lam sees
-        # the ratio z sqrt(m lam).
-        zr = zeta * np.sqrt(m * lam)
-        dt_t = 2.0 / np.sqrt(k / m) * (np.sqrt(1.0 + zeta * zeta) - zeta)
-        dt_r = 2.0 / np.sqrt(k * lam) * (np.sqrt(1.0 + zr * zr) - zr)
-        return dt_t, dt_r
+        """(dt_t, dt_r) of each free block (sim.free's order): block_dt_bounds with the stiffest contact law."""
+        return block_dt_bounds(self.A, self.free, float(self.lawtab[:, :, LAW_KN].max()),
+                               float(self.lawtab[:, :, LAW_ZETA].max()))
 
     def critical_dt(self):
         """2 / omega_max for the stiffest contact on the lightest moving block (translation and rotation)."""
@@ -449,6 +456,8 @@ class Simulation:
             scale = max(scale, e[0] + e[2] + abs(e[1] - self.PE0) + e[3] + e[4] + e[5])
             if first:
                 first = False
+                if self.after_first_step is not None:
+                    self.after_first_step(self)
                 if left > 0 and self.steps % rec_steps:
                     continue
             res.record(self)

@@ -33,10 +33,15 @@ from cases import SCENES
 from dda import generate, hoekbray, shapes
 from dda._state import LAW_COH, LAW_TANPHI
 from dda.geoblocks import INTACT, JOINT, build_blocks
-from dda.georun import geo_scene
+from dda.georun import geo_scene, scale_small_blocks
+from dda.keyblocks import can_stand
+from dda.simulation import ContactLaw, Simulation
+from dda.system import BlockSystem
 from dda.wedge import bracket_and_bisect
 from sgim.common import SceneError
+from sgim.geometry import dip_to_normal
 from sgim.scene import load_scene, scene_from_dict
+from blocks import box
 from engine_runs import require_engine
 
 G = 9.81
@@ -61,14 +66,30 @@ def slope_data(phi, radius=60.0, centre=None, **blocks):
             "blocks": bl}
 
 
-def free_sim(data, free_of):
-    """The scene's block model and its Simulation with only the blocks free_of(model) free: (model, block
-    system, simulation, index of the first free block)."""
+def free_scene(data, free_of):
+    """The scene's block model and its GeoScene with only the blocks free_of(model) free, and the index of the
+    first free block."""
     scene = scene_from_dict(data, "test.toml")
     model = build_blocks(scene)
     free = free_of(model)
-    bs, sim = geo_scene(scene, model=model, fixed=~free).build()
-    return model, bs, sim, int(np.nonzero(free)[0][0])
+    return model, geo_scene(scene, model=model, fixed=~free), int(np.nonzero(free)[0][0])
+
+
+def free_sim(data, free_of):
+    """The scene's block model and its Simulation with only the blocks free_of(model) free: (model, block
+    system, simulation, index of the first free block)."""
+    model, gs, i = free_scene(data, free_of)
+    bs, sim = gs.build()
+    return model, bs, sim, i
+
+
+def screened(data, free_of):
+    """The key blocks (dda/keyblocks.py) the scene's run finds at its first step, with only the blocks
+    free_of(model) free; and the index of the first free block."""
+    _, gs, i = free_scene(data, free_of)
+    _, sim = gs.build()
+    sim.run(sim.dt)
+    return gs.key["cemented"], i
 
 
 def free_run(data, free_of, t1, t2):
@@ -245,6 +266,52 @@ def test_key_block_widening_downward_falls_at_g_and_its_twin_stays():
     assert np.linalg.norm(d) < 1e-3, d  # wedged in: the elastic settling only
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_can_stand_on_a_plane_exactly_at_tan_phi_equal_to_tan_psi(seed):
+    """dda.keyblocks.can_stand against limit equilibrium: a body on one plane of dip psi (random dip direction,
+    and a second plane it leans on that does not hold it: a vertical side wall along the dip) stands when
+    tan phi is 0.1 % above tan psi, and not 0.1 % below."""
+    rng = np.random.default_rng(seed)
+    psi, dipdir = rng.uniform(10, 70), rng.uniform(0, 360)
+    base = -dip_to_normal(psi, dipdir)  # the body's outward normal: down into the plane
+    side = np.cross(base, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)  # vertical, containing the dip line
+    w = np.array([0.0, 0.0, -rng.uniform(1.0, 1e7)])
+    for planes in ([base], [base, side]):
+        for ratio, stands in ((1.001, True), (0.999, False)):
+            mu = ratio * math.tan(math.radians(psi))
+            assert can_stand(planes, [mu] * len(planes), w) == stands, (psi, dipdir, ratio, len(planes))
+
+
+def test_can_stand_on_the_two_joints_of_hoek_brays_wedge_from_their_critical_angle():
+    """The wedge of the `wedge` generator on its joints A 45/005 and B 55/135 (the body's outward normals down
+    into both): it stands 0.1 % above Hoek & Bray's critical friction (both planes in contact, c = 0) and not
+    0.1 % below."""
+    hb = hoekbray.wedge_fs(**HB)
+    planes = [-dip_to_normal(*HB["joint_a"]), -dip_to_normal(*HB["joint_b"])]
+    w = np.array([0.0, 0.0, -hb.volume * HB["unit_weight"]])
+    for ratio, stands in ((1.001, True), (0.999, False)):
+        mu = ratio * math.tan(math.radians(hb.critical_friction))
+        assert can_stand(planes, [mu, mu], w) == stands, ratio
+
+
+@pytest.mark.parametrize("ratio,key", [(0.995, True), (1.005, False)])
+def test_key_block_screening_of_the_slope_at_the_joint_dip(ratio, key):
+    """dda.keyblocks.key_blocks on the planar-sliding slope after the first step: the block above the joint is a
+    key block 0.5 % below tan phi = tan psi and not 0.5 % above (the run's onset test above); the rest is fixed."""
+    phi = math.degrees(math.atan(ratio * math.tan(math.radians(PSI))))
+    kb, i = screened(slope_data(phi), above_joint)
+    assert kb.blocks.tolist() == ([i] if key else [])
+    assert (~kb.held).sum() == 1 and not kb.held[kb.cluster[i]]
+
+
+def test_key_block_screening_of_the_gallery_roof():
+    """The crown block that widens downward is a key block (it falls at g above); its inverted twin is not."""
+    for widens_down in (True, False):
+        kb, i = screened(key_block_data(widens_down), crown)
+        assert kb.blocks.tolist() == ([i] if widens_down else []), widens_down
+
+
 @pytest.fixture(scope="module")
 def tunnel():
     """cases/scenes/tunnel_blocks.toml cut and run as the scene says (its boundary fixed, every other block free,
@@ -286,6 +353,19 @@ def bridge_data(cohesion, phi=20.0, share=0.5, R=1000.0, tensile=0.0):
     down = np.array([math.cos(math.radians(PSI)), 0.0, -math.sin(math.radians(PSI))])
     centre = toe + share * (top - toe) + R * down
     return slope_data(phi, radius=R, centre=centre.tolist(), cohesion=cohesion, tensile=tensile), centre, down
+
+
+def test_key_block_screening_of_a_rock_bridge_with_the_cement_holding_and_broken():
+    """The bridge slope at phi = 20 (below the joint's 35 degree dip): the block on the finite disc is held while
+    its rock bridge's cement holds (it is one cluster with the fixed rock behind the bridge) and is a key block
+    once the cement is taken as broken (dda.keyblocks.key_blocks(cemented=False)); the block of the same slope
+    with no bridge (a disc larger than the slope) is a key block either way."""
+    for data, held in ((bridge_data(1e6)[0], True), (slope_data(20.0), False)):
+        _, gs, i = free_scene(data, above_joint)
+        _, sim = gs.build()
+        sim.run(sim.dt)
+        assert gs.key["cemented"].blocks.tolist() == ([] if held else [i])
+        assert gs.key["uncemented"].blocks.tolist() == [i]
 
 
 def area_outside_disc(poly, normal, centre, R, n=2000):
@@ -400,6 +480,9 @@ def test_dda_run_cli_on_an_sgim_scene(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     # the key block falls (0.2 m in 0.2 s); the other free pieces (not on the domain's x sides or bottom) rest
     assert summary["blocks_moved"] == 1 and summary["status"] == "ok"
+    # the screening of the first step named it, and only it, a key block, whether the cement holds or not
+    for key in summary["key_blocks"].values():
+        assert (key["key_blocks"], key["key_blocks_moved"], key["other_blocks_moved"]) == (1, 1, 0), key
     # the resting pieces fall asleep and cost no integration; the falling key block is integrated at every step
     cost = summary["cost"]
     assert summary["steps"] <= cost["block_steps"] < 0.9 * cost["block_steps_all_awake"]
@@ -445,6 +528,33 @@ def test_far_field_fixed_by_free_within_is_the_blocks_farther_than_that_from_the
     assert gs.far_fixed == int((far & ~bottom).sum())
     fixed = np.array([s.fixed for s in gs.blocks])
     assert np.array_equal(fixed, far | bottom)
+
+
+def test_small_blocks_are_mass_scaled_to_the_others_step_with_their_weight_kept():
+    """dda.georun.scale_small_blocks (what `dda run` of an sgim scene does with the free blocks below [blocks]
+    min_volume, instead of fixing them): a 2 m cube and a 0.1 m cube resting on a fixed base, the small one
+    flagged. Both bounds of a block's stable step go as sqrt(rho L^3) for similar shapes, so the factor is
+    (2 / 0.1)^3 = 8000; the run's step is then that of the same system with the small cube fixed, its weight
+    stays rho V g, and it rests on the base."""
+    law = ContactLaw(kn=1e9, damping=0.1)
+
+    def system(small_fixed):
+        bs = BlockSystem()
+        bs.add_block(box([-5, -5, -1], [5, 5, 0], fixed=True), density=2700.0)
+        bs.add_block(box([0, 0, 0], [2, 2, 2]), density=2700.0)
+        bs.add_block(box([3, 0, 0], [3.1, 0.1, 0.1], fixed=small_fixed), density=2700.0)
+        return bs
+
+    bs = system(False)
+    n, f = scale_small_blocks(bs.arrays(), [False, False, True], law.kn, law.damping, (0.0, 0.0, -G))
+    assert n == 1 and f == pytest.approx(8000.0, rel=1e-9)
+    sim = Simulation(bs, law)
+    ref = Simulation(system(True), law)
+    assert sim.dt == pytest.approx(ref.dt, rel=1e-12)
+    A = sim.A
+    assert A.mass[2] * G - A.bforce[2, 2] == pytest.approx(2700.0 * 1e-3 * G, rel=1e-12)
+    sim.run(0.2)
+    assert np.abs(sim.pos[1:] - sim.pos0[1:]).max() < 1e-4  # both rest on the base (elastic settling only)
 
 
 def test_free_near_names_an_excavation_or_a_cavity():
