@@ -2,14 +2,13 @@
 model's volume against the exact polyhedral volume under the terrain inside the domain (each terrain triangle
 clipped to the domain's plan rectangle, the linear height integrated over the clipped polygon).
 
-    python -m cases.bench.blocks              # open_pit_coarse + three joint sets at 10 m, and open_pit_dfn
+    python -m cases.bench.blocks              # open_pit_blocks (three joint sets at 10 m) and open_pit_dfn
     python -m cases.bench.blocks --only pit --runs 1
 
-Scenes: cases/scenes/open_pit_coarse.toml with a [blocks] table of three persistent sets at 10 m spacing (dip /
-dip direction 80/130, 70/220, 10/000, as cases/scenes/open_pit_blocks.toml) and min_volume 5 m3;
-cases/scenes/open_pit_dfn.toml (its 6114 sampled fractures and the fault) with min_volume 5 m3. A table on stdout, never a test. Each cut runs in a fresh
-process so that the peak memory (ru_maxrss) is its own; the cutting time is the median of ``--runs`` cuts (3), with
-the load average before and after them.
+Scenes: cases/scenes/open_pit_blocks.toml (the pit's discs and fault, its three persistent sets at 10 m spacing,
+min_volume 5 m3); cases/scenes/open_pit_dfn.toml (its 6114 sampled fractures and the fault) with min_volume 5 m3.
+A table on stdout, never a test. Each cut runs in a fresh process so that the peak memory (ru_maxrss) is its own;
+the cutting time is the median of ``--runs`` cuts (3), with the load average before and after them.
 """
 from __future__ import annotations
 
@@ -28,33 +27,11 @@ import numpy as np
 from cases import SCENES
 from sgim.machine import machine_line
 
-FABRIC = """
-[blocks]
-min_volume = 5.0
-
-[[blocks.joint_set]]
-name = "S1"
-dip = 80.0
-dip_direction = 130.0
-spacing = 10.0
-
-[[blocks.joint_set]]
-name = "S2"
-dip = 70.0
-dip_direction = 220.0
-spacing = 10.0
-
-[[blocks.joint_set]]
-name = "S3"
-dip = 10.0
-dip_direction = 0.0
-spacing = 10.0
-"""
 WARM = {"domain": {"min": [0, 0, 0], "max": [10, 10, 10]}, "packing": {"kind": "cubic", "radius": 0.5},
         "excavation": [{"points": [[0, 0, 8], [10, 0, 7], [10, 10, 9], [0, 10, 8], [5, 5, 6]]}],
         "discontinuity": [{"centre": [5, 5, 4], "dip": 30, "dip_direction": 10, "radius": 3}],
         "blocks": {"joint_set": [{"dip": 70, "dip_direction": 40, "spacing": 3}]}}
-CASES = {"pit": ("open_pit_coarse.toml", FABRIC), "dfn": ("open_pit_dfn.toml", "\n[blocks]\nmin_volume = 5.0\n")}
+CASES = {"pit": ("open_pit_blocks.toml", ""), "dfn": ("open_pit_dfn.toml", "\n[blocks]\nmin_volume = 5.0\n")}
 
 
 def _clip(poly, axis, val, keep_ge):
