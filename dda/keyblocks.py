@@ -1,8 +1,8 @@
 """Key blocks of a block model: the groups of blocks that cannot stand under gravity, found before they move.
 
 Blocks joined by cemented (intact rock) contact points move as one body while the cement holds, so the test is
-made per cluster: the blocks connected by pairs with a bonded point. A cluster with a fixed block is held. Each
-other cluster is tested on its contact planes with the rest of the model (one per distinct normal: a
+made per cluster: the blocks connected by cemented contacts (current_pairs). A cluster with a fixed block is
+held. Each other cluster is tested on its contact planes with the rest of the model (one per distinct normal: a
 face-to-face contact's points share theirs) by the translation modes of block theory (Goodman & Shi), each
 with its limit equilibrium (Hoek & Bray's planar and wedge sliding): it lifts off along its weight when that
 leaves every contact plane; it slides on one plane, along the weight's part in it, when that direction leaves
@@ -178,8 +178,8 @@ def key_blocks(sim, free_face, gravity=None, cemented=True):
     ncl, cluster = connected_components(graph, directed=False)
     held = np.zeros(ncl, bool)
     np.logical_or.at(held, cluster, np.asarray(A.fixed, bool) | np.asarray(A.kin, bool))
-    mass = np.zeros(ncl)
-    np.add.at(mass, cluster, A.mass)
+    load = np.zeros((ncl, 3))  # each cluster's weight (a mass-scaled block's body force gives its weight back)
+    np.add.at(load, cluster, A.mass[:, None] * g + A.bforce)
     normals = world_normals(sim)
     tanphi = face_tanphi(sim)
     contact = ~np.asarray(free_face, bool)
@@ -198,5 +198,5 @@ def key_blocks(sim, free_face, gravity=None, cemented=True):
     for c in np.flatnonzero(~held):
         f = faces[starts[c]:starts[c + 1]]
         planes, mu = distinct_planes(normals[f], tanphi[f])
-        cannot[c] = not can_stand(planes, mu, mass[c] * g)
+        cannot[c] = not can_stand(planes, mu, load[c])
     return KeyBlocks(cluster=cluster, held=held, cannot_stand=cannot)
