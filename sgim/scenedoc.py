@@ -305,7 +305,9 @@ SGIM_KEYS = {
     "blocks": K("", "the block model's own keys (dda/geoblocks.py); sgim build reads and checks them, then ignores "
                     "them", absent="no joint sets, defaults below"),
     "blocks.min_volume": K("m3", "a cut leaving a smaller piece is not made; smaller excavation pieces join a "
-                                 "neighbour when their union is convex", default="1e-6 x the domain's volume"),
+                                 "neighbour across intact rock when their union is convex; a run scales the inertia "
+                                 "of those left (their weight kept) so that they do not set the time step",
+                           default="1e-6 x the domain's volume"),
     "blocks.cut_by": K("", "names of [[discontinuity]] tables and [[joint_set]] sets that cut blocks",
                        absent="all of them"),
     "blocks.cohesion": K("Pa", "intact rock's cohesion (faces outside every disc)"),
