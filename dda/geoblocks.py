@@ -87,18 +87,8 @@ class BlockModel:
         return np.array([self.sources[s].kind for s in self.blocks[i].src], np.int64)
 
     def point_kinds(self, i, face, points):
-        """The kind (KINDS index) of each contact point on face ``face`` of block ``i``: a disc's (triangle's) face
-        is its kind inside the disc (triangle), intact rock outside; other faces have their source's kind."""
-        src = self.sources[self.blocks[i].src[face]]
-        pts = np.atleast_2d(np.asarray(points, float))
-        out = np.full(len(pts), src.kind, np.int64)
-        if src.shape == "disc":
-            rel = pts - src.centre
-            radial = rel - np.outer(rel @ src.normal, src.normal)
-            out[np.einsum("ij,ij->i", radial, radial) > src.radius ** 2] = INTACT
-        elif src.shape == "triangle":
-            out[~_in_triangle(src.tri, pts)] = INTACT
-        return out
+        """The kind (KINDS index) of each contact point on face ``face`` of block ``i`` (kinds_at)."""
+        return kinds_at(self.sources[self.blocks[i].src[face]], points)
 
     def volumes(self):
         return np.array([b.volume() for b in self.blocks])
@@ -113,6 +103,20 @@ class BlockModel:
                 "smallest": float(vol.min()) if some else None, "median": float(np.median(vol)) if some else None,
                 "largest": float(vol.max()) if some else None, "materials": mat,
                 "small_blocks": int((vol < self.min_volume).sum()), "min_volume": self.min_volume, **self.stats}
+
+
+def kinds_at(src, points):
+    """The kind (KINDS index) at each of `points` on a face made by source `src`: a disc's (triangle's) face is its
+    kind inside the disc (triangle), intact rock outside; other faces have their source's kind."""
+    pts = np.atleast_2d(np.asarray(points, float))
+    out = np.full(len(pts), src.kind, np.int64)
+    if src.shape == "disc":
+        rel = pts - src.centre
+        radial = rel - np.outer(rel @ src.normal, src.normal)
+        out[np.einsum("ij,ij->i", radial, radial) > src.radius ** 2] = INTACT
+    elif src.shape == "triangle":
+        out[~_in_triangle(src.tri, pts)] = INTACT
+    return out
 
 
 def _in_triangle(tri, pts):
@@ -475,17 +479,7 @@ def _hull_block(a, b, na, da):
 def _joined_by_rock(block, k, sources):
     """True when face k of the block is intact rock throughout: an intact split, or a disc's (triangle's) face
     that lies wholly outside its disc (triangle)."""
-    src = sources[block.src[k]]
-    if src.kind == INTACT:
-        return True
-    corners = block.v[list(block.faces[k])]
-    if src.shape == "disc":
-        rel = corners - src.centre
-        radial = rel - np.outer(rel @ src.normal, src.normal)
-        return bool((np.einsum("ij,ij->i", radial, radial) > src.radius ** 2).all())
-    if src.shape == "triangle":
-        return not _in_triangle(src.tri, corners).any()
-    return False
+    return bool((kinds_at(sources[block.src[k]], block.v[list(block.faces[k])]) == INTACT).all())
 
 
 def _merge_slivers(pool, min_volume, stats, sources):
