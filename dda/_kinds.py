@@ -100,39 +100,6 @@ def no_kinds():
 
 
 @njit(cache=True, inline="always")
-def near_history(npt_old, pos_old, us_old, bond_old, slot, P, tol, nrm, matched, us):
-    """Last step's point of the pair nearest P within `tol` that no point has claimed yet: its shear displacement
-    (turned onto the current plane, length kept) into us; returns (found, bonded). The faces of cut blocks meet
-    with coincident vertices, and which block's vertex stands for a corner (its feature id) may change from one
-    step to the next: a cemented contact keeps its bond by its place."""
-    best = -1
-    bd = tol * tol
-    if slot >= 0:
-        for r in range(npt_old[slot]):
-            if matched[r]:
-                continue
-            d0 = pos_old[slot, r, 0] - P[0]
-            d1 = pos_old[slot, r, 1] - P[1]
-            d2 = pos_old[slot, r, 2] - P[2]
-            d = d0 * d0 + d1 * d1 + d2 * d2
-            if d <= bd:
-                bd = d
-                best = r
-    if best < 0:
-        return False, False
-    matched[best] = True
-    l0 = np.sqrt(us_old[slot, best, 0] ** 2 + us_old[slot, best, 1] ** 2 + us_old[slot, best, 2] ** 2)
-    un = us_old[slot, best, 0] * nrm[0] + us_old[slot, best, 1] * nrm[1] + us_old[slot, best, 2] * nrm[2]
-    for a in range(3):
-        us[a] = us_old[slot, best, a] - un * nrm[a]
-    l1 = np.sqrt(us[0] * us[0] + us[1] * us[1] + us[2] * us[2])
-    if l1 > 0.0:
-        for a in range(3):
-            us[a] *= l0 / l1
-    return True, bond_old[slot, best]
-
-
-@njit(cache=True, inline="always")
 def intact_share(f, owner, p_pos, k, rows, nrm, pos, quat, face_geo, intact_row, R):
     """(area per intact point, area per joint point) of a contact whose face f (of block `owner`) is a disc's:
     the contact polygon's area outside the disc over the intact points, inside it over the others (the

@@ -34,7 +34,7 @@ from numba import njit
 from ._contact import point_force
 from ._deform import add_strain_force, body_point, point_velocity
 from ._fcp import MAXP, clip_line, contact_points, fcp, gap_along, polygon_area, sat_search
-from ._kinds import intact_share, law_face, near_history, point_row
+from ._kinds import intact_share, law_face, point_row
 from ._kinematics import quat_matrix, spin
 from ._state import (C_CONTACTS, C_FIT, C_NEW, C_POINTS, C_SAT, C_SLIDING, C_WAKE, LAW_COH, LAW_KN, LAW_KS,
                      LAW_TANPHI, LAW_TEN, LAW_ZETA, T_DAMPING, T_ELASTIC, T_FRICTION, T_MAXDEPTH, T_TURNOVER)
@@ -203,6 +203,15 @@ def _effective_mass(kin_i, kin_j, static_j, m_i, m_j):
 
 
 @njit(cache=True, inline="always")
+def _dist2(pos_old, slot, r, p_pos, q):
+    """Squared distance between last step's point r of pair slot `slot` and the point q."""
+    d0 = pos_old[slot, r, 0] - p_pos[q, 0]
+    d1 = pos_old[slot, r, 1] - p_pos[q, 1]
+    d2 = pos_old[slot, r, 2] - p_pos[q, 2]
+    return d0 * d0 + d1 * d1 + d2 * d2
+
+
+@njit(cache=True, inline="always")
 def _cross(a0, a1, a2, b0, b1, b2):
     """a x b."""
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
@@ -277,6 +286,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
     face_row, face_shape, face_geo, intact_row = law.face_row, law.face_shape, law.face_geo, law.intact_row
     kinds = len(face_row) > 0
     pos_old, a_old, b_old, nhe = con.pos[old], con.a[old], con.b[old], he_origin.shape[0]
+    rec = np.empty(MAXP + 1, np.int64)  # each point's record of last step (the pair loop)
     for p in range(npair):
         i = pa[p]
         j = pb[p]
@@ -402,15 +412,44 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     for q in range(k):
                         rows[q] = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
                     a_int, a_jnt = intact_share(lf, lo, p_pos, k, rows, nrm, pos, quat, face_geo, intact_row, R)
-            if lf >= 0 and slot >= 0:
-                # a cut block model: the records last step's points hand on by their feature ids are claimed first,
-                # so that near_history (a point's record by its place) never hands the same record to a second
-                # point (two points with one shear spring and no point turnover booked: energy made from nothing)
+            # last step's record of each point (rec[q], -1: none): the record of the same feature id; in a cut block
+            # model (lf >= 0) only while it lies at the point's place (within tolp: a feature id can come to
+            # stand for another place, e.g. the crossing of two near-parallel edges, or a merged candidate whose
+            # id and place come from different vertices), else the nearest unclaimed record at its place
+            # (coincident vertices of cut blocks: which one stands for a corner may change), nearest pairs
+            # first; a point that opens takes a record by place only to keep a bond (else the record is booked
+            # as released at its own place below, and the opening point has nothing to book)
+            for q in range(k):
+                rec[q] = -1
+            if slot >= 0:
+                tolp2 = (1e-3 * size) ** 2
                 for q in range(k):
                     for r in range(npt_old[slot]):
-                        if pid_old[slot, r] == p_id[q] and not matched[r]:
-                            matched[r] = True
+                        if pid_old[slot, r] == p_id[q]:
+                            if lf < 0 or _dist2(pos_old, slot, r, p_pos, q) <= tolp2:
+                                rec[q] = r
+                                matched[r] = True
                             break
+                if lf >= 0:
+                    while True:
+                        bq = -1
+                        br = -1
+                        bd = tolp2
+                        for q in range(k):
+                            if rec[q] >= 0:
+                                continue
+                            for r in range(npt_old[slot]):
+                                if matched[r] or (p_depth[q] <= 0.0 and not bond_old[slot, r]):
+                                    continue
+                                d2 = _dist2(pos_old, slot, r, p_pos, q)
+                                if d2 <= bd:
+                                    bd = d2
+                                    bq = q
+                                    br = r
+                        if bq < 0:
+                            break
+                        rec[bq] = br
+                        matched[br] = True
             for q in range(k):
                 if lf >= 0:  # the law of the face's kind at this point (joint inside its disc, intact rock outside)
                     r = point_row(lf, lo, p_pos[q], pos, quat, face_row, face_shape, face_geo, intact_row, R)
@@ -418,17 +457,11 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                         apt = a_int if r == intact_row else a_jnt
                     kn, kt, tanphi = lawtab[r, r, LAW_KN], lawtab[r, r, LAW_KS], lawtab[r, r, LAW_TANPHI]
                     coh, ten, zeta = lawtab[r, r, LAW_COH], lawtab[r, r, LAW_TEN], lawtab[r, r, LAW_ZETA]
-                # shear history of the same feature in last step's contact, turned onto the current plane
-                found = -1
-                if slot >= 0:
-                    for r in range(npt_old[slot]):
-                        if pid_old[slot, r] == p_id[q]:
-                            found = r
-                            break
+                # shear history of the point's record (above), turned onto the current plane
+                found = rec[q]
                 fd0, fd1, fd2 = 0.0, 0.0, 0.0  # the point's damping force last step
                 e_open = 0.0  # its normal spring's energy if it opens now (_book_gone)
                 if found >= 0:
-                    matched[found] = True
                     us[0], us[1], us[2] = _onto_plane(us_old[slot, found, 0], us_old[slot, found, 1],
                                                       us_old[slot, found, 2], nrm[0], nrm[1], nrm[2])
                     bonded = bond_old[slot, found]
@@ -438,14 +471,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     us[0] = 0.0
                     us[1] = 0.0
                     us[2] = 0.0
-                    bonded = False
-                    if lf >= 0:  # a cut block model: the same place is the same point (dda/_kinds.py)
-                        hit, bonded = near_history(npt_old, pos_old, us_old, bond_old, slot, p_pos[q],
-                                                   1e-3 * size, nrm, matched, us)
-                        if hit:
-                            found = 0
-                    if found < 0:
-                        bonded = first_step and (coh > 0.0 or ten > 0.0)
+                    bonded = first_step and (coh > 0.0 or ten > 0.0)
                 opens = p_depth[q] <= 0.0 and not bonded
                 if opens and found < 0:
                     continue
@@ -495,6 +521,10 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                 # half with the next one's (last step's force here)
                 tally[T_DAMPING] += 0.5 * dd - 0.5 * dt * (fd0 * vrel[0] + fd1 * vrel[1] + fd2 * vrel[2])
                 if st == 0:
+                    if found >= 0:
+                        # a bonded point that point_force found broken in tension: its normal spring's second half,
+                        # as for a point that opens (_book_gone; its shear spring went with the friction)
+                        tally[T_TURNOVER] += e_open
                     continue
                 if found < 0 and not first_step:
                     # a new point: its normal spring holds 1/2 kn d^2 but took the work of half its force over this
