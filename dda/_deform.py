@@ -261,11 +261,13 @@ def deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces):
     d_loc = 0.0
     for a in range(3):
         f = force[i, a] + m * gravity[a] + bforce[i, a]
+        fd = 0.0
         if local_damp > 0.0 and vel[i, a] != 0.0:
             fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
             f -= fd
-            d_loc += fd * vel[i, a] * dtavg
         vnew = vel[i, a] + dtavg * f / m
+        # paired with the mean of the half-step velocities on either side (the product-form kinetic energy's)
+        d_loc += fd * 0.5 * (vel[i, a] + vnew) * dtavg
         ke += 0.5 * m * vel[i, a] * vnew
         vel[i, a] = vnew
         pe -= (m * gravity[a] + bforce[i, a]) * pos[i, a]
@@ -288,18 +290,20 @@ def deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces):
             q -= vc[i, a, b] * strain[i, b]
         Q[3 + a] = q
         d0[3 + a] = srate[i, a]
+    fdq = np.zeros(9)
     if local_damp > 0.0:
         for a in range(9):
             if d0[a] != 0.0:
-                fd = local_damp * abs(Q[a]) * (1.0 if d0[a] > 0 else -1.0)
-                Q[a] -= fd
-                d_loc += fd * d0[a] * dtavg
+                fdq[a] = local_damp * abs(Q[a]) * (1.0 if d0[a] > 0 else -1.0)
+                Q[a] -= fdq[a]
     d1 = np.empty(9)
     for a in range(9):
         acc = 0.0
         for b in range(9):
             acc += m9inv[i, a, b] * Q[b]
         d1[a] = d0[a] + dtavg * acc
+    for a in range(9):
+        d_loc += fdq[a] * 0.5 * (d0[a] + d1[a]) * dtavg
     for a in range(9):
         for b in range(9):
             ke += 0.5 * d0[a] * m9[i, a, b] * d1[b]

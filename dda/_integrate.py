@@ -293,25 +293,35 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         fsq = 0.0
         tsq = 0.0
         for a in range(3):
+            tsq += torque[i, a] * torque[i, a]
+        # local damping: alpha |f| against each component of the velocity, likewise for the torque
+        td0, td1, td2 = 0.0, 0.0, 0.0
+        if local_damp > 0.0:
+            if w_old[0] != 0.0:
+                td0 = local_damp * abs(torque[i, 0]) * (1.0 if w_old[0] > 0 else -1.0)
+            if w_old[1] != 0.0:
+                td1 = local_damp * abs(torque[i, 1]) * (1.0 if w_old[1] > 0 else -1.0)
+            if w_old[2] != 0.0:
+                td2 = local_damp * abs(torque[i, 2]) * (1.0 if w_old[2] > 0 else -1.0)
+        for a in range(3):
             f = force[i, a] + m * gravity[a] + bforce[i, a]
-            t = torque[i, a]
             fsq += f * f
-            tsq += t * t
-            if local_damp > 0.0:
-                if vel[i, a] != 0.0:
-                    fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
-                    f -= fd
-                    tally[T_LOCAL] += fd * vel[i, a] * dtavg
-                if w_old[a] != 0.0:
-                    td = local_damp * abs(t) * (1.0 if w_old[a] > 0 else -1.0)
-                    t -= td
-                    tally[T_LOCAL] += td * w_old[a] * dtavg
+            fd = 0.0
+            if local_damp > 0.0 and vel[i, a] != 0.0:
+                fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
+                f -= fd
             vnew = vel[i, a] + dtavg * f / m
+            # a force's work in the product-form kinetic energy pairs it with the mean of the half-step velocities
+            # on either side of its step
+            tally[T_LOCAL] += fd * 0.5 * (vel[i, a] + vnew) * dtavg
             tally[T_KIN] += 0.5 * m * vel[i, a] * vnew
             vel[i, a] = vnew
-            Lnew[a] = angmom[i, a] + dtavg * t
+            Lnew[a] = angmom[i, a] + dtavg * (torque[i, a] - (td0 if a == 0 else (td1 if a == 1 else td2)))
             tally[T_POT] -= (m * gravity[a] + bforce[i, a]) * pos[i, a]
         ang_vel(R, inertia[i], Lnew, w_new)
+        if local_damp > 0.0:
+            tally[T_LOCAL] += 0.5 * dtavg * (td0 * (w_old[0] + w_new[0]) + td1 * (w_old[1] + w_new[1])
+                                             + td2 * (w_old[2] + w_new[2]))
         tally[T_KIN] += 0.5 * (angmom[i, 0] * w_new[0] + angmom[i, 1] * w_new[1] + angmom[i, 2] * w_new[2])
         if sleep_on:
             # the calm-step counter: speed and acceleration below par[1] and par[2]
