@@ -569,21 +569,24 @@ def integrate(mo, sp, env, dt, dt_prev, acc, x_ref):
             for a in range(3):
                 f = force[i, a] + m[i] * gravity[a] + bforce[i, a]
                 tq = torque[i, a]
+                fd = 0.0  # the damping force and torque, taken from f and tq
+                td = 0.0
                 if visc > 0.0:
-                    fv = visc * V[i, a]
-                    f -= fv
-                    d_loc += fv * V[i, a] * dtavg
+                    fd = visc * V[i, a]
+                    f -= fd
                 if local_damp > 0.0:
                     if V[i, a] != 0.0:
-                        fd = local_damp * abs(f) * (1.0 if V[i, a] > 0 else -1.0)
-                        f -= fd
-                        d_loc += fd * V[i, a] * dtavg
+                        fl = local_damp * abs(f) * (1.0 if V[i, a] > 0 else -1.0)
+                        f -= fl
+                        fd += fl
                     if W[i, a] != 0.0:
                         td = local_damp * abs(tq) * (1.0 if W[i, a] > 0 else -1.0)
                         tq -= td
-                        d_loc += td * W[i, a] * dtavg
                 vn_ = V[i, a] + dtavg * f / m[i]
                 wn_ = W[i, a] + dtavg * tq / inertia[i]
+                # their work with the mean of the half-step velocities on either side of the step (the product-form
+                # kinetic energy's pairing)
+                d_loc += 0.5 * dtavg * (fd * (V[i, a] + vn_) + td * (W[i, a] + wn_))
                 ke += 0.5 * m[i] * V[i, a] * vn_ + 0.5 * inertia[i] * W[i, a] * wn_
                 pe -= (m[i] * gravity[a] + bforce[i, a]) * X[i, a]
                 V[i, a] = vn_
