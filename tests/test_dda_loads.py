@@ -182,6 +182,23 @@ def test_local_damping_closes_the_energy_balance(plunge, alpha):
     assert abs(res.energy_column("balance_error")[-1]) < 1e-3 * drop
 
 
+@pytest.mark.parametrize("alpha", [0.3, 0.8])
+def test_local_damping_slows_a_sliding_block_to_one_minus_alpha_of_its_acceleration(alpha):
+    """Cundall's local damping takes alpha |F| against the velocity: a block that slides under a constant net
+    force F (a plane tilted 40 degrees, friction 30) accelerates at (1 - alpha) F / m, so it moves
+    (1 - alpha) a t^2 / 2 with a = g (sin 40 - cos 40 tan 30) (within 2 %: the block seats on its springs first)."""
+    psi = math.radians(40.0)
+    bs = BlockSystem()
+    bs.add_block(box((-20, -2, -1), (20, 2, 0)), fixed=True)
+    i = bs.add_block(box((-0.5, -0.5, 0.0), (0.5, 0.5, 1.0)))
+    sim = Simulation(bs, ContactLaw(kn=1e9, friction_deg=30.0, damping=0.2),
+                     gravity=(G * math.sin(psi), 0.0, -G * math.cos(psi)), local_damping=alpha)
+    t = 0.5
+    sim.run(t, record_every=0.1)
+    a = G * (math.sin(psi) - math.cos(psi) * math.tan(math.radians(30.0)))
+    assert sim.displacement(i)[0] == pytest.approx(0.5 * (1.0 - alpha) * a * t * t, rel=0.02)
+
+
 # ---------------------------------------------------------------- resting blocks sleep
 def _stack_and_projectile(arrive=0.75):
     bs = BlockSystem()
