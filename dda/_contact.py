@@ -20,6 +20,15 @@ OPEN, LOCKED, SLIDING = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
+def local_damping(alpha, f, v):
+    """Cundall's local damping of a force (torque) component f on a body moving at v along it: alpha |f| with
+    the sign of v (0 for v = 0), to be taken from f."""
+    if v == 0.0:
+        return 0.0
+    return alpha * abs(f) * (1.0 if v > 0 else -1.0)
+
+
+@njit(cache=True, inline="always")
 def point_force(kn, ks, tanphi, coh_force, ten_force, zeta, meff, depth, n, vrel, dt, us, bonded, out_f):
     """Force on block B (A -> B normal n) at one point. Updates us in place.
 

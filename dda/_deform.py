@@ -30,6 +30,7 @@ from numba import njit
 
 from sgim.portable import cholesky, eigvalsh, inv, matmul
 
+from ._contact import local_damping
 from ._kinematics import place_vertices, quat_matrix
 from .polyhedra import mass_properties
 
@@ -262,8 +263,8 @@ def deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces):
     for a in range(3):
         f = force[i, a] + m * gravity[a] + bforce[i, a]
         fd = 0.0
-        if local_damp > 0.0 and vel[i, a] != 0.0:
-            fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
+        if local_damp > 0.0:
+            fd = local_damping(local_damp, f, vel[i, a])
             f -= fd
         vnew = vel[i, a] + dtavg * f / m
         # paired with the mean of the half-step velocities on either side (the product-form kinetic energy's)
@@ -293,9 +294,8 @@ def deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces):
     fdq = np.zeros(9)
     if local_damp > 0.0:
         for a in range(9):
-            if d0[a] != 0.0:
-                fdq[a] = local_damp * abs(Q[a]) * (1.0 if d0[a] > 0 else -1.0)
-                Q[a] -= fdq[a]
+            fdq[a] = local_damping(local_damp, Q[a], d0[a])
+            Q[a] -= fdq[a]
     d1 = np.empty(9)
     for a in range(9):
         acc = 0.0

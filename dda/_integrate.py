@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from ._broad import build_grid, buckets_for, find_pairs, inside_cells, map_cells, n_cells
+from ._contact import local_damping
 from ._deform import deform_geometry, deform_step
 from ._fcp import MAXP
 from ._kinematics import ang_vel, place_vertices, quat_matrix, turn, turned
@@ -297,18 +298,15 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         # local damping: alpha |f| against each component of the velocity, likewise for the torque
         td0, td1, td2 = 0.0, 0.0, 0.0
         if local_damp > 0.0:
-            if w_old[0] != 0.0:
-                td0 = local_damp * abs(torque[i, 0]) * (1.0 if w_old[0] > 0 else -1.0)
-            if w_old[1] != 0.0:
-                td1 = local_damp * abs(torque[i, 1]) * (1.0 if w_old[1] > 0 else -1.0)
-            if w_old[2] != 0.0:
-                td2 = local_damp * abs(torque[i, 2]) * (1.0 if w_old[2] > 0 else -1.0)
+            td0 = local_damping(local_damp, torque[i, 0], w_old[0])
+            td1 = local_damping(local_damp, torque[i, 1], w_old[1])
+            td2 = local_damping(local_damp, torque[i, 2], w_old[2])
         for a in range(3):
             f = force[i, a] + m * gravity[a] + bforce[i, a]
             fsq += f * f
             fd = 0.0
-            if local_damp > 0.0 and vel[i, a] != 0.0:
-                fd = local_damp * abs(f) * (1.0 if vel[i, a] > 0 else -1.0)
+            if local_damp > 0.0:
+                fd = local_damping(local_damp, f, vel[i, a])
                 f -= fd
             vnew = vel[i, a] + dtavg * f / m
             # a force's work in the product-form kinetic energy pairs it with the mean of the half-step velocities

@@ -48,7 +48,7 @@ import numpy as np
 from numba import njit
 
 from ._bondlaw import _blank_key, _hkey, bond_forces, bond_lookup, pair_meff, sync_central
-from ._contact import point_force
+from ._contact import local_damping, point_force
 from ._sphere_state import (E_DAMPING, E_ELASTIC, E_FRICTION, E_KIN, E_LOCAL, E_POT, LAW_KN, LAW_KS, LAW_TANPHI,
                             LAW_ZETA, ST_BONDS, ST_BROKEN, ST_BUILDS, ST_CONTACTS, ST_JOINTS, ST_NEED,
                             ST_NEED_PAIRS, ST_WALL, Motion)
@@ -575,13 +575,11 @@ def integrate(mo, sp, env, dt, dt_prev, acc, x_ref):
                     fd = visc * V[i, a]
                     f -= fd
                 if local_damp > 0.0:
-                    if V[i, a] != 0.0:
-                        fl = local_damp * abs(f) * (1.0 if V[i, a] > 0 else -1.0)
-                        f -= fl
-                        fd += fl
-                    if W[i, a] != 0.0:
-                        td = local_damp * abs(tq) * (1.0 if W[i, a] > 0 else -1.0)
-                        tq -= td
+                    fl = local_damping(local_damp, f, V[i, a])
+                    f -= fl
+                    fd += fl
+                    td = local_damping(local_damp, tq, W[i, a])
+                    tq -= td
                 vn_ = V[i, a] + dtavg * f / m[i]
                 wn_ = W[i, a] + dtavg * tq / inertia[i]
                 # their work with the mean of the half-step velocities on either side of the step (the product-form
