@@ -256,6 +256,44 @@ def _point_loads(i, R, pl_start, pl_r, pl_f, force, torque, pos, tally):
         tally[T_POT] -= f0 * (pos[i, 0] + r0) + f1 * (pos[i, 1] + r1) + f2 * (pos[i, 2] + r2)
 
 
+@njit(cache=True, inline="always")
+def _calm_step(i, sz, vel, w, dtavg, par, calm, sw):
+    """The calm-step counter of rigid block i after its step: speed (centroid plus size times angular) below
+    par[1] every step; at the end of a window of par[3] such steps, the least-squares slope of its velocity
+    (v = (velocity, size x angular velocity), sums in sw) over the window below par[2] -- a mean acceleration, in
+    which the vibration of a block resting on stiff contacts averages out where one step's acceleration would not.
+    A window that fails starts anew; a block past its window stays calm while its speed stays below par[1]."""
+    spd = np.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) + sz * np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
+    if spd >= par[1]:
+        calm[i] = 0
+        return
+    n = np.int64(par[3])
+    c = calm[i]
+    if c >= n:
+        calm[i] = c + 1
+        return
+    if c == 0:
+        for a in range(12):
+            sw[i, a] = 0.0
+    for a in range(3):
+        sw[i, a] += vel[i, a]
+        sw[i, 3 + a] += sz * w[a]
+        sw[i, 6 + a] += c * vel[i, a]
+        sw[i, 9 + a] += c * sz * w[a]
+    c += 1
+    if c == n:
+        # slope per step of samples k = 0..n-1: (sum k v - (n-1)/2 sum v) / (n (n^2 - 1) / 12)
+        den = n * (n * n - 1) / 12.0 * dtavg
+        kbar = 0.5 * (n - 1)
+        sl, sa = 0.0, 0.0
+        for a in range(3):
+            sl += ((sw[i, 6 + a] - kbar * sw[i, a]) / den) ** 2
+            sa += ((sw[i, 9 + a] - kbar * sw[i, 3 + a]) / den) ** 2
+        if np.sqrt(sl) + np.sqrt(sa) >= par[2]:
+            c = 0
+    calm[i] = c
+
+
 @njit(cache=True)
 def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sleep, acc, work, tally):
     """Stage 4: central difference of the moving blocks (prescribed, deformable, rigid). Returns True when the
@@ -269,7 +307,7 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
     force, torque, gravity, bforce = forces.force, forces.torque, loads.gravity, loads.bforce
     pl_start, pl_r, pl_f = loads.pl_start, loads.pl_r, loads.pl_f
     R, w_old, w_new, Lnew, qh = work.R, work.w_old, work.w_new, work.Lnew, work.qh
-    par, calm = sleep.par, sleep.calm
+    par, calm, sw, ke_step = sleep.par, sleep.calm, sleep.sw, sleep.ke
     sleep_on = par[0] > 0.0
     for k in range(active.shape[0]):
         i = active[k]
@@ -291,19 +329,15 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         quat_matrix(quat[i], R)
         _point_loads(i, R, pl_start, pl_r, pl_f, force, torque, pos, tally)
         ang_vel(R, inertia[i], angmom[i], w_old)
-        fsq = 0.0
-        tsq = 0.0
-        for a in range(3):
-            tsq += torque[i, a] * torque[i, a]
         # local damping: alpha |f| against each component of the velocity, likewise for the torque
         td0, td1, td2 = 0.0, 0.0, 0.0
         if local_damp > 0.0:
             td0 = local_damping(local_damp, torque[i, 0], w_old[0])
             td1 = local_damping(local_damp, torque[i, 1], w_old[1])
             td2 = local_damping(local_damp, torque[i, 2], w_old[2])
+        ke_i = 0.0
         for a in range(3):
             f = force[i, a] + m * gravity[a] + bforce[i, a]
-            fsq += f * f
             fd = 0.0
             if local_damp > 0.0:
                 fd = local_damping(local_damp, f, vel[i, a])
@@ -312,7 +346,7 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
             # a force's work in the product-form kinetic energy pairs it with the mean of the half-step velocities
             # on either side of its step
             tally[T_LOCAL] += fd * 0.5 * (vel[i, a] + vnew) * dtavg
-            tally[T_KIN] += 0.5 * m * vel[i, a] * vnew
+            ke_i += 0.5 * m * vel[i, a] * vnew
             vel[i, a] = vnew
             Lnew[a] = angmom[i, a] + dtavg * (torque[i, a] - (td0 if a == 0 else (td1 if a == 1 else td2)))
             tally[T_POT] -= (m * gravity[a] + bforce[i, a]) * pos[i, a]
@@ -320,18 +354,11 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         if local_damp > 0.0:
             tally[T_LOCAL] += 0.5 * dtavg * (td0 * (w_old[0] + w_new[0]) + td1 * (w_old[1] + w_new[1])
                                              + td2 * (w_old[2] + w_new[2]))
-        tally[T_KIN] += 0.5 * (angmom[i, 0] * w_new[0] + angmom[i, 1] * w_new[1] + angmom[i, 2] * w_new[2])
+        ke_i += 0.5 * (angmom[i, 0] * w_new[0] + angmom[i, 1] * w_new[1] + angmom[i, 2] * w_new[2])
+        tally[T_KIN] += ke_i
         if sleep_on:
-            # the calm-step counter: speed and acceleration below par[1] and par[2]
-            sz = size_b[i]
-            spd = np.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) \
-                + sz * np.sqrt(w_new[0] ** 2 + w_new[1] ** 2 + w_new[2] ** 2)
-            imin = min(inertia[i, 0], min(inertia[i, 1], inertia[i, 2]))
-            acl = np.sqrt(fsq) / m + sz * np.sqrt(tsq) / imin
-            if spd < par[1] and acl < par[2]:
-                calm[i] += 1
-            else:
-                calm[i] = 0
+            ke_step[i] = ke_i
+            _calm_step(i, size_b[i], vel, w_new, dtavg, par, calm, sw)
         # mid-step orientation predictor, then the full turn (turned: scalars, so that no array is counted in
         # and out per block around its branch)
         qh[0], qh[1], qh[2], qh[3] = turned(quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3], w_new[0], w_new[1],
@@ -349,7 +376,7 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
 
 
 @njit(cache=True)
-def sleep_stage(blocks, loads, grid, lists, sleep, acc, work, tally, count):
+def sleep_stage(dt, blocks, loads, grid, lists, sleep, acc, work, tally, count):
     """Stage 5: calm blocks without a veto fall asleep, the blocks on the wake list wake; the grids anew when
     that changed the awake blocks. Returns the lists."""
     vel, angmom, static, veto = blocks.vel, blocks.angmom, work.static, work.veto
@@ -361,12 +388,17 @@ def sleep_stage(blocks, loads, grid, lists, sleep, acc, work, tally, count):
     for k in range(lists.active.shape[0]):
         i = lists.active[k]
         if not blocks.kin[i] and calm[i] >= n_calm and not veto[i]:
-            # falls asleep: the kinetic energy left (below the thresholds) counts as damped
-            quat_matrix(blocks.quat[i], R)
+            # falls asleep where this step's contacts and geometry found it (its position before the step): the
+            # carried contacts, its world geometry and its potential then agree, and the kinetic energy this step's
+            # books gave it there (below the thresholds) counts as damped instead
+            q = blocks.quat[i]
+            quat_matrix(q, R)
             ang_vel(R, blocks.inertia[i], angmom[i], w_old)
-            d_sleep += 0.5 * blocks.mass[i] * (vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) \
-                + 0.5 * (angmom[i, 0] * w_old[0] + angmom[i, 1] * w_old[1] + angmom[i, 2] * w_old[2])
+            d_sleep += sleep.ke[i]
+            tally[T_KIN] -= sleep.ke[i]
+            q[0], q[1], q[2], q[3] = turned(q[0], q[1], q[2], q[3], w_old[0], w_old[1], w_old[2], -dt)
             for a in range(3):
+                blocks.pos[i, a] -= dt * vel[i, a]
                 vel[i, a] = 0.0
                 angmom[i, a] = 0.0
             asleep[i] = True
@@ -444,7 +476,8 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
     blocks.
 
     Sleeping (``sleep.par = [on, velocity, acceleration, steps]``): a free block whose speed (centroid plus
-    angular speed times its size) and acceleration stay below the thresholds for ``steps`` steps falls asleep
+    angular speed times its size) stays below the threshold for ``steps`` steps, with a mean acceleration over
+    them (``_calm_step``) below its threshold, falls asleep
     when every block touching it is fixed, asleep or itself calm that long; a sleeping block is neither
     integrated nor searched for contacts (its contacts with other resting blocks are carried over unchanged, so
     shear history and elastic energy are kept); it wakes the step after a block that is not calm touches it.
@@ -492,7 +525,7 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
         blown = integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, lists.active, sleep, acc, work,
                           tally)
         if sleep_on:
-            lists = sleep_stage(blocks, loads, grid, lists, sleep, acc, work, tally, count)
+            lists = sleep_stage(dt, blocks, loads, grid, lists, sleep, acc, work, tally, count)
         dt_prev = dt
         close_step(npair, lists.active.shape[0], acc, books, tally, count)
         done += 1

@@ -574,7 +574,7 @@ def _read_simulation(rd, data):
         if k in st:
             sleep[k] = rd.number(st, k, f"simulation.{k}", positive=True)
     if "sleep_steps" in st:
-        sleep["sleep_steps"] = int(rd.number(st, "sleep_steps", "simulation.sleep_steps", lo=1, hi=1e9))
+        sleep["sleep_steps"] = int(rd.number(st, "sleep_steps", "simulation.sleep_steps", lo=2, hi=1e9))
     duration = rd.number(st, "duration", "simulation.duration", positive=True, **DURATION)
     dt = rd.number(st, "dt", "simulation.dt", default=D["simulation.dt"], nonneg=True) or None
     safety = rd.number(st, "safety", "simulation.safety", default=D["simulation.safety"], positive=True, hi=1.0)

@@ -41,9 +41,9 @@ DDA_KEYS = {
     "simulation.sleep": K("", "resting blocks stop being integrated"),
     "simulation.sleep_velocity": K("m/s", "sleep: speed below which a block may rest",
                                    absent="1e-4 sqrt(g d50), d50 the median block size (dda/simulation.py)"),
-    "simulation.sleep_accel": K("m/s2", "sleep: acceleration below which a block may rest",
+    "simulation.sleep_accel": K("m/s2", "sleep: mean acceleration over the calm steps below which a block may rest",
                                 absent="1e-3 g (dda/simulation.py)"),
-    "simulation.sleep_steps": K("-", "sleep: steps below both thresholds before a block rests",
+    "simulation.sleep_steps": K("-", "sleep: steps below the speed threshold (the window of the mean acceleration) before a block rests",
                                 absent="200 (dda/simulation.py)"),
     "simulation.max_steps": K("-", "refuse a run of more steps (duration / dt) before it starts (a positive "
                                    "integer; or [limits] max_steps, not both)", type="integer",

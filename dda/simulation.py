@@ -26,8 +26,9 @@ force)``, ``bs.add_block(spec, prescribed=True)``. Their energy: the constant lo
 the potential column, and so is minus the work the prescribed blocks do on the others (the driver's input).
 
 Sleeping (``sleep=True``): a free block whose speed (centroid speed plus angular speed times its size) stays
-below ``sleep_velocity`` and its acceleration below ``sleep_accel`` for ``sleep_steps`` steps, and whose
-contacts are all with fixed, sleeping or equally calm blocks, is no longer integrated nor searched for contacts
+below ``sleep_velocity`` for ``sleep_steps`` steps, with a mean acceleration over those steps (the least-squares
+slope of its velocity, centroid plus size times angular, so that the vibration of a block resting on stiff
+contacts averages out) below ``sleep_accel``, and whose contacts are all with fixed, sleeping or equally calm blocks, is no longer integrated nor searched for contacts
 (its resting contacts are kept as they are); it wakes when a moving block touches it. Defaults:
 sleep_velocity = 1e-4 sqrt(g d50), sleep_accel = 1e-3 g (d50 the median block size; g = 9.81 without
 gravity). ``sim.active`` lists the awake moving blocks, ``sim.asleep`` flags the sleeping ones;
@@ -202,6 +203,8 @@ class Simulation:
         self.after_first_step = None
         self.asleep = np.zeros(nb, bool)
         self.calm = np.zeros(nb, np.int64)
+        self.sw = np.zeros((nb, 12))
+        self.ke_step = np.zeros(nb)
         self.pe_sl = np.zeros(nb)
         self.acc = np.zeros(2)  # [work of the prescribed blocks, potential energy of the sleeping blocks]
         self.vert = np.zeros_like(A.vloc)
@@ -249,8 +252,8 @@ class Simulation:
         g0 = norm(self.gravity) or 9.81
         v_s = 1e-4 * math.sqrt(g0 * self.d50) if sleep_velocity is None else float(sleep_velocity)
         a_s = 1e-3 * g0 if sleep_accel is None else float(sleep_accel)
-        if sleep and not (v_s > 0 and a_s > 0 and sleep_steps >= 1):
-            raise ValueError("sleep thresholds must be > 0 and sleep_steps >= 1")
+        if sleep and not (v_s > 0 and a_s > 0 and sleep_steps >= 2):
+            raise ValueError("sleep thresholds must be > 0 and sleep_steps >= 2")
         self.sleep_par = np.array([1.0 if sleep else 0.0, v_s, a_s, float(int(sleep_steps))])
         self.first_step = True
         # dt(0) = 0: the first step is a half step, v(1/2) = v(0) + dt/2 a(0), so the given initial
@@ -338,7 +341,7 @@ class Simulation:
             Grid(self.S, self.margin, self.gap, self.cellbox, self.large, self.stamp, self.tag),
             Lists(self.active, self.mstart, self.mentries, self.fstart, self.fentries, self.large_list,
                   self.pa, self.pb),
-            Sleep(self.movable, self.asleep, self.calm, self.pe_sl, self.sleep_par),
+            Sleep(self.movable, self.asleep, self.calm, self.pe_sl, self.sleep_par, self.sw, self.ke_step),
             Contacts(self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np,
                      self.c_pid, self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth,
                      self.c_fd, self.htab),

@@ -289,6 +289,53 @@ def test_two_calm_blocks_touching_fall_asleep_together_and_stay_still():
     assert np.array_equal(sim.pos, p)
 
 
+@pytest.mark.parametrize("turn", [False, True])
+@pytest.mark.parametrize("ratio", [0.8, 1.25])
+def test_a_block_sleeps_only_when_its_mean_acceleration_is_below_the_threshold(turn, ratio):
+    """A free block (no gravity, no contacts) under a constant load whose acceleration is `ratio` x sleep_accel,
+    slow enough (far below sleep_velocity) for a window of calm steps: it falls asleep after one window when the
+    acceleration is below the threshold and never when above (then it keeps x = a t^2 / 2). With `turn`, a couple
+    about z turns the unit cube, whose rim accelerates at size x torque / I_z, I_z = m (1 + 1) / 12."""
+    a_s, n, dt, m = 0.01, 500, 2e-4, 1000.0
+    bs = BlockSystem()
+    i = bs.add_block(box((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)), density=m)
+    if turn:
+        f = ratio * a_s * m / 6.0  # torque f x 1 m; size 1 m
+        bs.add_point_load(i, (0.5, 0.0, 0.0), (0.0, f, 0.0))
+        bs.add_point_load(i, (-0.5, 0.0, 0.0), (0.0, -f, 0.0))
+    else:
+        bs.add_body_load(i, (ratio * a_s * m, 0.0, 0.0))
+    sim = Simulation(bs, ContactLaw(kn=1e9), gravity=(0.0, 0.0, 0.0), dt=dt, sleep=True, sleep_velocity=1.0,
+                     sleep_accel=a_s, sleep_steps=n)
+    sim.run(3 * n * dt, record_every=n * dt)
+    assert sim.asleep[i] == (ratio < 1.0)
+    if ratio > 1.0 and not turn:
+        assert sim.pos[i, 0] == pytest.approx(0.5 * ratio * a_s * sim.time ** 2, rel=1e-9)
+
+
+def test_a_block_vibrating_on_stiff_contacts_falls_asleep():
+    """A unit cube set down on a fixed floor without damping rings on its four corner springs (omega^2 = 4 kn / m,
+    velocity amplitude g / omega = 7.9 mm/s, acceleration amplitude g, far above sleep_accel = 1e-3 g): its mean
+    acceleration over a window of many periods is ~0, so it falls asleep after one window, within the ringing's
+    amplitude g / omega^2 of its static rest (where the step's contacts found it), and the energy balance stays as
+    it was (the kinetic energy it had counts as damped)."""
+    kn, n = 1e9, 500
+    bs = BlockSystem()
+    bs.add_block(box((-2, -2, -1), (2, 2, 0)), fixed=True)
+    i = bs.add_block(box((-0.5, -0.5, 0), (0.5, 0.5, 1)))
+    sim = Simulation(bs, ContactLaw(kn=kn, friction_deg=30.0), sleep=True, sleep_velocity=0.05, sleep_steps=n)
+    m = float(sim.A.mass[i])
+    omega = math.sqrt(4 * kn / m)
+    assert n * sim.dt * omega > 100  # many periods in the window
+    res = sim.run(1.5 * n * sim.dt, record_every=0.25 * n * sim.dt)
+    assert sim.asleep[i] and sim.block_steps == n
+    rest = G / omega ** 2
+    assert abs(sim.pos[i, 2] - (0.5 - rest)) < 1.05 * rest
+    # the balance keeps the value the first contact step gave it (2.3 mJ) through falling asleep
+    err = res.energy_column("balance_error")[1:]
+    assert np.ptp(err) < 1e-9 * 0.5 * m * (G / omega) ** 2
+
+
 def test_sleep_scene_keys():
     d = _scene()
     d["simulation"].update(sleep=True, sleep_velocity=1e-3, sleep_accel=0.01, sleep_steps=10)

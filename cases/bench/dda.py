@@ -365,7 +365,7 @@ def _pit_stages(sim, steps):
         it.integrate(sim.dt, sim.dt, sim.local_damping, blocks, deform, loads, forces, lists.active, sleep, books.acc,
                      work, tally)
         t.append(time.process_time())
-        lists = it.sleep_stage(blocks, loads, grid, lists, sleep, books.acc, work, tally, count)
+        lists = it.sleep_stage(sim.dt, blocks, loads, grid, lists, sleep, books.acc, work, tally, count)
         t.append(time.process_time())
         sim.set_lists(lists)
         sim.steps += 1
