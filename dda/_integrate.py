@@ -258,38 +258,39 @@ def _point_loads(i, R, pl_start, pl_r, pl_f, force, torque, pos, tally):
 
 @njit(cache=True, inline="always")
 def _calm_step(i, sz, vel, w, dtavg, par, calm, sw):
-    """The calm-step counter of rigid block i after its step: speed (centroid plus size times angular) below
-    par[1] every step; at the end of a window of par[3] such steps, the least-squares slope of its velocity
-    (v = (velocity, size x angular velocity), sums in sw) over the window below par[2] -- a mean acceleration, in
-    which the vibration of a block resting on stiff contacts averages out where one step's acceleration would not.
-    A window that fails starts anew; a block past its window stays calm while its speed stays below par[1]."""
+    """The calm-step counter of rigid block i after its step. Over each window of par[3] steps, with the
+    velocity v = (velocity, size x angular velocity) summed in sw: the window's mean speed below par[1] and the
+    least-squares slope of v (a mean acceleration) below par[2] -- means, in which the ringing of a block resting
+    on stiff contacts averages out where one step's speed and acceleration would not -- and no step's speed above
+    ten times par[1]. A window that fails starts the count anew; the windows go on while the block is calm, so a
+    calm block that starts to creep or accelerate is caught at the next window's end."""
     spd = np.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) + sz * np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
-    if spd >= par[1]:
+    if spd >= 10.0 * par[1]:
         calm[i] = 0
         return
     n = np.int64(par[3])
     c = calm[i]
-    if c >= n:
-        calm[i] = c + 1
-        return
-    if c == 0:
+    k = c % n
+    if k == 0:
         for a in range(12):
             sw[i, a] = 0.0
     for a in range(3):
         sw[i, a] += vel[i, a]
         sw[i, 3 + a] += sz * w[a]
-        sw[i, 6 + a] += c * vel[i, a]
-        sw[i, 9 + a] += c * sz * w[a]
+        sw[i, 6 + a] += k * vel[i, a]
+        sw[i, 9 + a] += k * sz * w[a]
     c += 1
-    if c == n:
-        # slope per step of samples k = 0..n-1: (sum k v - (n-1)/2 sum v) / (n (n^2 - 1) / 12)
+    if k == n - 1:
+        # mean of samples k = 0..n-1: sum v / n; slope per step: (sum k v - (n-1)/2 sum v) / (n (n^2 - 1) / 12)
         den = n * (n * n - 1) / 12.0 * dtavg
         kbar = 0.5 * (n - 1)
-        sl, sa = 0.0, 0.0
+        ml, ma, sl, sa = 0.0, 0.0, 0.0, 0.0
         for a in range(3):
+            ml += sw[i, a] ** 2
+            ma += sw[i, 3 + a] ** 2
             sl += ((sw[i, 6 + a] - kbar * sw[i, a]) / den) ** 2
             sa += ((sw[i, 9 + a] - kbar * sw[i, 3 + a]) / den) ** 2
-        if np.sqrt(sl) + np.sqrt(sa) >= par[2]:
+        if (np.sqrt(ml) + np.sqrt(ma)) / n >= par[1] or np.sqrt(sl) + np.sqrt(sa) >= par[2]:
             c = 0
     calm[i] = c
 
@@ -475,9 +476,9 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
     Their potential -F.x enters the potential energy with gravity's, minus the cumulative work of the prescribed
     blocks.
 
-    Sleeping (``sleep.par = [on, velocity, acceleration, steps]``): a free block whose speed (centroid plus
-    angular speed times its size) stays below the threshold for ``steps`` steps, with a mean acceleration over
-    them (``_calm_step``) below its threshold, falls asleep
+    Sleeping (``sleep.par = [on, velocity, acceleration, steps]``): a free block whose mean speed (centroid plus
+    angular speed times its size) and mean acceleration over a window of ``steps`` steps stay below the
+    thresholds (``_calm_step``) falls asleep
     when every block touching it is fixed, asleep or itself calm that long; a sleeping block is neither
     integrated nor searched for contacts (its contacts with other resting blocks are carried over unchanged, so
     shear history and elastic energy are kept); it wakes the step after a block that is not calm touches it.

@@ -25,10 +25,10 @@ Loads and prescribed motion (see dda/system.py): ``bs.add_body_load(i, force)``,
 force)``, ``bs.add_block(spec, prescribed=True)``. Their energy: the constant loads' potential -F.x is part of
 the potential column, and so is minus the work the prescribed blocks do on the others (the driver's input).
 
-Sleeping (``sleep=True``): a free block whose speed (centroid speed plus angular speed times its size) stays
-below ``sleep_velocity`` for ``sleep_steps`` steps, with a mean acceleration over those steps (the least-squares
-slope of its velocity, centroid plus size times angular, so that the vibration of a block resting on stiff
-contacts averages out) below ``sleep_accel``, and whose contacts are all with fixed, sleeping or equally calm blocks, is no longer integrated nor searched for contacts
+Sleeping (``sleep=True``): a free block whose mean speed over ``sleep_steps`` steps (centroid speed plus angular
+speed times its size) is below ``sleep_velocity`` and whose mean acceleration over them (the least-squares slope of
+that velocity) is below ``sleep_accel`` -- means, so that the ringing of a block resting on stiff contacts averages
+out; no step's speed may exceed ten times sleep_velocity -- and whose contacts are all with fixed, sleeping or equally calm blocks, is no longer integrated nor searched for contacts
 (its resting contacts are kept as they are); it wakes when a moving block touches it. Defaults:
 sleep_velocity = 1e-4 sqrt(g d50), sleep_accel = 1e-3 g (d50 the median block size; g = 9.81 without
 gravity). ``sim.active`` lists the awake moving blocks, ``sim.asleep`` flags the sleeping ones;

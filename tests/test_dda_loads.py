@@ -313,6 +313,25 @@ def test_a_block_sleeps_only_when_its_mean_acceleration_is_below_the_threshold(t
         assert sim.pos[i, 0] == pytest.approx(0.5 * ratio * a_s * sim.time ** 2, rel=1e-9)
 
 
+@pytest.mark.parametrize("turn", [False, True])
+@pytest.mark.parametrize("ratio", [0.8, 1.25])
+def test_a_block_sleeps_only_when_its_mean_speed_is_below_the_threshold(turn, ratio):
+    """A free block (no gravity, no loads) drifting at `ratio` x sleep_velocity -- its centroid, or with `turn`
+    the rim of the unit cube spinning about z (size 1 m x angular speed) -- falls asleep after one window when the
+    speed is below the threshold and never when above."""
+    v_s, n, dt = 0.01, 500, 2e-4
+    bs = BlockSystem()
+    i = bs.add_block(box((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)))
+    sim = Simulation(bs, ContactLaw(kn=1e9), gravity=(0.0, 0.0, 0.0), dt=dt, sleep=True, sleep_velocity=v_s,
+                     sleep_accel=1.0, sleep_steps=n)
+    if turn:
+        sim.angmom[i] = (0.0, 0.0, float(sim.A.inertia[i, 2]) * ratio * v_s)
+    else:
+        sim.vel[i] = (ratio * v_s, 0.0, 0.0)
+    sim.run(3 * n * dt, record_every=n * dt)
+    assert sim.asleep[i] == (ratio < 1.0)
+
+
 def test_a_block_vibrating_on_stiff_contacts_falls_asleep():
     """A unit cube set down on a fixed floor without damping rings on its four corner springs (omega^2 = 4 kn / m,
     velocity amplitude g / omega = 7.9 mm/s, acceleration amplitude g, far above sleep_accel = 1e-3 g): its mean
