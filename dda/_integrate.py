@@ -257,16 +257,19 @@ def _point_loads(i, R, pl_start, pl_r, pl_f, force, torque, pos, tally):
 
 
 @njit(cache=True, inline="always")
-def _calm_step(i, sz, vel, w, dtavg, par, calm, sw):
+def _calm_step(i, sz, vel, w, dtavg, par, calm, sw, woke):
     """The calm-step counter of rigid block i after its step. Over each window of par[3] steps, with the
     velocity v = (velocity, size x angular velocity) summed in sw: the window's mean speed below par[1] and the
     least-squares slope of v (a mean acceleration) below par[2] -- means, in which the ringing of a block resting
     on stiff contacts averages out where one step's speed and acceleration would not -- and no step's speed above
-    ten times par[1]. A window that fails starts the count anew; the windows go on while the block is calm, so a
-    calm block that starts to creep or accelerate is caught at the next window's end."""
+    ten times par[1] (a block just woken, ``woke``: above par[1], until its first window ends, so that a block woken
+    and pushed counts as moving at once and wakes the blocks it pushes). A window that fails starts the count anew;
+    the windows go on while the block is calm, so a calm block that starts to creep or accelerate is caught at the
+    next window's end."""
     spd = np.sqrt(vel[i, 0] ** 2 + vel[i, 1] ** 2 + vel[i, 2] ** 2) + sz * np.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
-    if spd >= 10.0 * par[1]:
+    if spd >= (1.0 if woke[i] else 10.0) * par[1]:
         calm[i] = 0
+        woke[i] = False
         return
     n = np.int64(par[3])
     c = calm[i]
@@ -292,6 +295,7 @@ def _calm_step(i, sz, vel, w, dtavg, par, calm, sw):
             sa += ((sw[i, 9 + a] - kbar * sw[i, 3 + a]) / den) ** 2
         if (np.sqrt(ml) + np.sqrt(ma)) / n >= par[1] or np.sqrt(sl) + np.sqrt(sa) >= par[2]:
             c = 0
+        woke[i] = False
     calm[i] = c
 
 
@@ -308,7 +312,7 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
     force, torque, gravity, bforce = forces.force, forces.torque, loads.gravity, loads.bforce
     pl_start, pl_r, pl_f = loads.pl_start, loads.pl_r, loads.pl_f
     R, w_old, w_new, Lnew, qh = work.R, work.w_old, work.w_new, work.Lnew, work.qh
-    par, calm, sw, ke_step = sleep.par, sleep.calm, sleep.sw, sleep.ke
+    par, calm, sw, ke_step, woke = sleep.par, sleep.calm, sleep.sw, sleep.ke, sleep.woke
     sleep_on = par[0] > 0.0
     for k in range(active.shape[0]):
         i = active[k]
@@ -359,7 +363,7 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         tally[T_KIN] += ke_i
         if sleep_on:
             ke_step[i] = ke_i
-            _calm_step(i, size_b[i], vel, w_new, dtavg, par, calm, sw)
+            _calm_step(i, size_b[i], vel, w_new, dtavg, par, calm, sw, woke)
         # mid-step orientation predictor, then the full turn (turned: scalars, so that no array is counted in
         # and out per block around its branch)
         qh[0], qh[1], qh[2], qh[3] = turned(quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3], w_new[0], w_new[1],
@@ -417,7 +421,12 @@ def sleep_stage(dt, blocks, loads, grid, lists, sleep, acc, work, tally, count):
         if asleep[j]:
             asleep[j] = False
             static[j] = False
-            calm[j] = 0
+            # woken at rest: the first sample (zero velocity) of a new window, not a moving block (which would
+            # wake its sleeping neighbours in turn) until it fails a test (_calm_step)
+            calm[j] = 1
+            sleep.woke[j] = True
+            for a in range(12):
+                sleep.sw[j, a] = 0.0
             acc[ACC_SLEEPING] -= sleep.pe_sl[j]
             # it slept through this step's integration: its potential is this step's still (from next step on,
             # integrate's)
@@ -479,9 +488,12 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
     Sleeping (``sleep.par = [on, velocity, acceleration, steps]``): a free block whose mean speed (centroid plus
     angular speed times its size) and mean acceleration over a window of ``steps`` steps stay below the
     thresholds (``_calm_step``) falls asleep
-    when every block touching it is fixed, asleep or itself calm that long; a sleeping block is neither
-    integrated nor searched for contacts (its contacts with other resting blocks are carried over unchanged, so
-    shear history and elastic energy are kept); it wakes the step after a block that is not calm touches it.
+    when no block touching it is moving (calm count 0: its last step or window failed); a sleeping block is
+    neither integrated nor searched for contacts (its contacts with other resting blocks are carried over
+    unchanged, so shear history and elastic energy are kept); it wakes the step after a moving block comes within
+    the search gap, at rest and with a count of 1 (the zero first sample of a window), so that it does not wake
+    its sleeping neighbours in turn unless it fails a test itself (until its first window ends, a step's speed
+    above the threshold fails it).
     ``acc[ACC_SLEEPING]`` holds the potential energy of the sleeping blocks (``sleep.pe_sl`` per block).
     Deformable blocks (``blocks.dof12[i]``, see dda/_deform.py): body-frame strains and strain rates and angular
     velocity (``deform``) replace ``angmom``; ``forces.qs`` collects the strain part of T^T f. They never sleep;

@@ -265,7 +265,6 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
     old = con.cur[0]
     new = 1 - old
     sleep_on = sleep.par[0] > 0.0
-    n_calm = np.int64(sleep.par[3])
     static, veto, matched, nrm, wake_list = work.static, work.veto, work.matched, work.nrm, work.wake_list
     kin, calm, asleep = blocks.kin, sleep.calm, sleep.asleep
     pos, size_b, material, lawtab, keep_gap = blocks.pos, blocks.size_b, blocks.material, law.tab, law.keep_gap
@@ -362,8 +361,9 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
             nrm_new[s, a] = nrm[a]
         npt_new[s] = 0
         matched[:] = False
-        if sleep_on and asleep[j] and not veto[j] and g < gap and (kin[i] or calm[i] < n_calm):
-            # a moving block comes within the search gap of a sleeping one: wake it before they touch
+        if sleep_on and asleep[j] and not veto[j] and g < gap and (kin[i] or calm[i] == 0):
+            # a moving block (calm count 0: it failed its last step or window) comes within the search gap of a
+            # sleeping one: wake it before they touch
             # (veto marks a sleeping block already on the wake list)
             veto[j] = True
             wake_list[count[C_WAKE]] = j
@@ -577,11 +577,11 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     _book_vanished(tally, i, j, fixed[i], static[j], pos_old[slot, r], depth_old[slot, r],
                                    fn_old[slot, r], us_old[slot, r], fd_old[slot, r], ks, nrm, dt, blocks)
         if sleep_on and kept > 0:
-            moving_i = kin[i] or calm[i] < n_calm
+            moving_i = kin[i] or calm[i] == 0
             if not asleep[j]:
                 if moving_i:
                     veto[j] = True
-                if not static[j] and (kin[j] or calm[j] < n_calm):
+                if not static[j] and (kin[j] or calm[j] == 0):
                     veto[i] = True
 
 

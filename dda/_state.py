@@ -32,8 +32,8 @@ Lists = namedtuple("Lists", "active mstart mentries fstart fentries large_list p
 # sleeping: the movable blocks, flags, calm-step counters, potential of each sleeping block, the parameters
 # [on, velocity, acceleration, steps], the calm window's velocity sums per block (nb x 12: sum v_k and sum k v_k of
 # v = (velocity, size x angular velocity), k = 0.. the window's steps), each rigid block's kinetic energy in this
-# step's books (integrate's product form)
-Sleep = namedtuple("Sleep", "movable asleep calm pe_sl par sw ke")
+# step's books (integrate's product form), the blocks woken and not yet through a window
+Sleep = namedtuple("Sleep", "movable asleep calm pe_sl par sw ke woke")
 # contact history, two buffers (cur[0] the current one): per pair key, blocks a and b, common-plane normal,
 # point count; per point feature id, shear displacement, state, bond, position, elastic normal force, depth;
 # the hash table on the pair key

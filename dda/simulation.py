@@ -28,8 +28,11 @@ the potential column, and so is minus the work the prescribed blocks do on the o
 Sleeping (``sleep=True``): a free block whose mean speed over ``sleep_steps`` steps (centroid speed plus angular
 speed times its size) is below ``sleep_velocity`` and whose mean acceleration over them (the least-squares slope of
 that velocity) is below ``sleep_accel`` -- means, so that the ringing of a block resting on stiff contacts averages
-out; no step's speed may exceed ten times sleep_velocity -- and whose contacts are all with fixed, sleeping or equally calm blocks, is no longer integrated nor searched for contacts
-(its resting contacts are kept as they are); it wakes when a moving block touches it. Defaults:
+out; no step's speed may exceed ten times sleep_velocity -- and that touches no moving block (one whose last step
+or window failed the test), is no longer integrated nor searched for contacts (its resting contacts are kept as
+they are); it wakes when a moving block comes near, at rest, and counts as moving (waking its sleeping neighbours
+in turn) only once it fails a test itself, a step's speed above sleep_velocity failing it until its first window
+ends. Defaults:
 sleep_velocity = 1e-4 sqrt(g d50), sleep_accel = 1e-3 g (d50 the median block size; g = 9.81 without
 gravity). ``sim.active`` lists the awake moving blocks, ``sim.asleep`` flags the sleeping ones;
 ``sim.fall_asleep(blocks)`` puts free blocks to sleep at once (a run that starts from a settled state).
@@ -205,6 +208,7 @@ class Simulation:
         self.calm = np.zeros(nb, np.int64)
         self.sw = np.zeros((nb, 12))
         self.ke_step = np.zeros(nb)
+        self.woke = np.zeros(nb, np.bool_)
         self.pe_sl = np.zeros(nb)
         self.acc = np.zeros(2)  # [work of the prescribed blocks, potential energy of the sleeping blocks]
         self.vert = np.zeros_like(A.vloc)
@@ -341,7 +345,7 @@ class Simulation:
             Grid(self.S, self.margin, self.gap, self.cellbox, self.large, self.stamp, self.tag),
             Lists(self.active, self.mstart, self.mentries, self.fstart, self.fentries, self.large_list,
                   self.pa, self.pb),
-            Sleep(self.movable, self.asleep, self.calm, self.pe_sl, self.sleep_par, self.sw, self.ke_step),
+            Sleep(self.movable, self.asleep, self.calm, self.pe_sl, self.sleep_par, self.sw, self.ke_step, self.woke),
             Contacts(self.cur, self.c_n_pair, self.c_key, self.c_a, self.c_b, self.c_nrm, self.c_np,
                      self.c_pid, self.c_us, self.c_state, self.c_bond, self.c_pos, self.c_fn, self.c_depth,
                      self.c_fd, self.htab),

@@ -229,8 +229,10 @@ def test_resting_stack_sleeps_wakes_when_hit_and_matches_the_run_without_sleepin
     assert np.linalg.norm(b.displacement(ids[2])) > 0.01
     assert not a.asleep[ids[2]]
     # 0.1 s after the impact both runs agree (an impact amplifies differences of 1e-6 in the initial
-    # velocity to about 1e-5 m here)
-    assert np.abs(a.pos - b.pos).max() < 1e-5
+    # velocity to about 1e-5 m here). The blocks under the struck one wake one step after the block above them
+    # starts to move (a block woken at rest wakes no others until it moves), not before the strike: the two
+    # steps (1.3e-4 s) the lowest block stays put during the impact make 9.4e-5 m of its 6.2 mm
+    assert np.abs(a.pos - b.pos).max() < 2e-4
     assert np.abs(a.vel - b.vel).max() < 1e-3
 
 
@@ -380,7 +382,7 @@ def test_cemented_hanging_blocks_sleep_and_wake_with_their_bonds_and_closed_bala
     """Two blocks hanging in tension from a fixed roof 10 m up by cemented contacts (cohesion and tensile
     strength, bonded at the start) settle and fall asleep; a prescribed block sliding past the lower one within the
     search gap, never touching it, wakes it (its contact with the sleeping upper block then has the lower block as
-    A), and both fall asleep again. Every bonded point keeps its bond through it, the blocks stay where they settled
+    A) and it alone (woken at rest and not moving, it wakes no others), and it falls asleep again. Every bonded point keeps its bond through it, the blocks stay where they settled
     (stretched W / (4 kn) per contact: 1.3e-5 m and 1.9e-5 m), nothing moves once asleep, and the energy balance of
     every step is closed, the steps where blocks fall asleep and wake included (a block falling asleep counted its
     potential twice in that step, a block waking not at all: 2.2e5 J here, taken for a blow-up)."""
@@ -399,7 +401,7 @@ def test_cemented_hanging_blocks_sleep_and_wake_with_their_bonds_and_closed_bala
     for _ in range(50):  # it passes the lower block from t = 0.223 to 0.377 s
         res.append(sim.run(0.005, record_every=sim.dt))
         states.append(tuple(sim.asleep[[up, lo]]))
-    assert (False, False) in states and states[-1] == (True, True), set(states)
+    assert (True, False) in states and (False, False) not in states and states[-1] == (True, True), set(states)
     # the lower block woke first (its contact with the sleeping upper block turned round) and the bonds held
     assert _bonded(sim, up, lo) == (lo, 4) and _bonded(sim, roof, up) == (up, 4)
     W = 2600.0 * G
