@@ -334,12 +334,18 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         quat_matrix(quat[i], R)
         _point_loads(i, R, pl_start, pl_r, pl_f, force, torque, pos, tally)
         ang_vel(R, inertia[i], angmom[i], w_old)
-        # local damping: alpha |f| against each component of the velocity, likewise for the torque
+        # local damping: alpha |f| against each component of the velocity; for the torque, about each principal
+        # axis (body frame): taken about the world axes, a long thin block's damping torque, alpha |T| in size,
+        # has a part about its axis of least inertia much larger than the torque there, and spins it up
         td0, td1, td2 = 0.0, 0.0, 0.0
         if local_damp > 0.0:
-            td0 = local_damping(local_damp, torque[i, 0], w_old[0])
-            td1 = local_damping(local_damp, torque[i, 1], w_old[1])
-            td2 = local_damping(local_damp, torque[i, 2], w_old[2])
+            for a in range(3):
+                tb = R[0, a] * torque[i, 0] + R[1, a] * torque[i, 1] + R[2, a] * torque[i, 2]
+                wb = R[0, a] * w_old[0] + R[1, a] * w_old[1] + R[2, a] * w_old[2]
+                d = local_damping(local_damp, tb, wb)
+                td0 += R[0, a] * d
+                td1 += R[1, a] * d
+                td2 += R[2, a] * d
         ke_i = 0.0
         for a in range(3):
             f = force[i, a] + m * gravity[a] + bforce[i, a]

@@ -6,8 +6,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from dda.scene import scene_from_dict
-from dda.simulation import ContactLaw, Simulation
-from dda.system import BlockSystem
+from dda.simulation import BlowUpError, ContactLaw, Simulation
+from dda.blockspec import BlockSpec
+from dda.system import BlockSystem, quat_to_matrix
 from blocks import box  # independent of dda.shapes
 from sgim.scene import SceneError
 
@@ -197,6 +198,75 @@ def test_local_damping_slows_a_sliding_block_to_one_minus_alpha_of_its_accelerat
     sim.run(t, record_every=0.1)
     a = G * (math.sin(psi) - math.cos(psi) * math.tan(math.radians(30.0)))
     assert sim.displacement(i)[0] == pytest.approx(0.5 * (1.0 - alpha) * a * t * t, rel=0.02)
+
+
+def _cube_on_springs_omega_max(kn, ks, m):
+    """The fastest mode of a unit cube (mass m, I = m / 6) on four corner springs (normal kn, shear ks): the
+    largest eigenvalue of M^-1 K, K = sum over the corners of B^T diag(ks, ks, kn) B, B = [I, -[r]x]."""
+    K = np.zeros((6, 6))
+    for x in (-0.5, 0.5):
+        for y in (-0.5, 0.5):
+            r = np.array([x, y, -0.5])
+            rx = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+            B = np.hstack([np.eye(3), -rx])
+            K += B.T @ np.diag([ks, ks, kn]) @ B
+    M = np.diag([m, m, m, m / 6, m / 6, m / 6])
+    return math.sqrt(np.linalg.eigvals(np.linalg.solve(M, K)).real.max())
+
+
+@pytest.mark.parametrize("alpha, frac, stable", [(0.8, 0.95, True), (0.8, 1.05, False), (0.0, 1.05, True)])
+def test_local_damping_lowers_the_stable_step_by_sqrt_one_plus_alpha(alpha, frac, stable):
+    """Local damping alpha |f| acts against the velocity before the step: in the fastest mode the velocity turns at
+    every step, so it points along the new velocity and the springs act as (1 + alpha) times as stiff; the
+    central difference is stable for omega_max dt < 2 / sqrt(1 + alpha). A cube ringing on its four corner springs
+    (omega_max from the eigenvalues of its 6 x 6 stiffness and mass) at frac x that step, alpha = 0.8: stable at
+    0.95, blows up at 1.05; without local damping the same step (omega_max dt = 1.57 < 2) is stable. The engine's
+    own step (dt_crit) carries the factor."""
+    kn, ks, m = 1e9, 5e8, 2600.0
+    w = _cube_on_springs_omega_max(kn, ks, m)
+    dt = frac * 2.0 / (w * math.sqrt(1.8))
+    bs = BlockSystem()
+    bs.add_block(box((-2, -2, -1), (2, 2, 0)), fixed=True)
+    i = bs.add_block(box((-0.5, -0.5, 0), (0.5, 0.5, 1)))
+    law = ContactLaw(kn=kn, ks=ks, friction_deg=45.0)
+    sim = Simulation(bs, law, dt=dt, local_damping=alpha)
+    sim.vel[i] = (1e-4, -2e-4, 0.0)
+    sim.angmom[i] = np.array([1e-4, -2e-4, 1.5e-4]) * m / 6
+    try:
+        sim.run(3000 * dt, record_every=100 * dt)
+        grew = np.linalg.norm(sim.vel[i]) > 1e-2
+    except BlowUpError:
+        grew = True
+    assert grew != stable
+    assert Simulation(bs, law, local_damping=0.8).dt_crit == pytest.approx(Simulation(bs, law).dt_crit / math.sqrt(1.8))
+
+
+def test_local_damping_does_not_spin_a_needle_about_its_axis():
+    """A free needle (5 m x 25 mm x 25 mm, axial inertia 2e-5 of the transverse one, axis tilted out of the world
+    axes) under a couple about a transverse axis, turning about the transverse axes, local damping 0.5: torque
+    and angular velocity have no part about its axis and, by Euler's equations for I2 = I3, it never turns about
+    it. Damping about the principal axes keeps that (axial speed at rounding); damped about the world axes it
+    spun up to 0.1 rad/s."""
+    c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
+    cy, sy = math.cos(math.radians(20)), math.sin(math.radians(20))
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]) @ np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    a, e1, e2 = R[:, 0], R[:, 1], R[:, 2]
+    b = box((-2.5, -0.0125, -0.0125), (2.5, 0.0125, 0.0125))
+    bs = BlockSystem()
+    i = bs.add_block(BlockSpec(b.vertices @ R.T, b.faces))
+    f = 10.0 * (e1 + 0.7 * e2)
+    bs.add_point_load(i, a, f)
+    bs.add_point_load(i, -a, -f)
+    sim = Simulation(bs, ContactLaw(kn=1e9), gravity=(0.0, 0.0, 0.0), local_damping=0.5)
+    I = sim.A.inertia[i]
+    Rb = quat_to_matrix(sim.quat[i])
+    assert abs(abs(Rb[:, np.argmin(I)] @ a) - 1.0) < 1e-12
+    sim.angmom[i] = Rb @ (I * (Rb.T @ (0.3 * e1 + 0.2 * e2)))
+    sim.run(1000 * sim.dt, record_every=200 * sim.dt)
+    Rb = quat_to_matrix(sim.quat[i])
+    w_axial = (Rb.T @ sim.angmom[i])[np.argmin(I)] / I.min()
+    assert abs(w_axial) < 1e-8
+    assert np.linalg.norm(sim.angmom[i]) > 1.0  # it turns about the transverse axes
 
 
 # ---------------------------------------------------------------- resting blocks sleep
