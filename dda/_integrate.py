@@ -494,11 +494,11 @@ def run_chunk(nsteps, dt, dt_prev, local_damp, first_step, blocks, deform, loads
     Sleeping (``sleep.par = [on, velocity, acceleration, steps]``): a free block whose mean speed (centroid plus
     angular speed times its size) and mean acceleration over a window of ``steps`` steps stay below the
     thresholds (``_calm_step``) falls asleep when no block touching it is moving (calm count 0: its last step or
-    window failed); a sleeping block is neither integrated nor searched for contacts (its contacts with other resting blocks are carried over
-    unchanged, so shear history and elastic energy are kept); it wakes the step after a moving block comes within
-    the search gap, at rest and with a count of 1 (the zero first sample of a window), so that it does not wake
-    its sleeping neighbours in turn unless it fails a test itself (until its first window ends, a step's speed
-    above the threshold fails it).
+    window failed); a sleeping block is neither integrated nor searched for contacts (its contacts with other
+    resting blocks are carried over unchanged, so shear history and elastic energy are kept); it wakes the step
+    after a moving block comes within the search gap, at rest and with a count of 1 (the zero first sample of a
+    window), so that it does not wake its sleeping neighbours in turn unless it fails a test itself (until its
+    first window ends, a step's speed above the threshold fails it).
     ``acc[ACC_SLEEPING]`` holds the potential energy of the sleeping blocks (``sleep.pe_sl`` per block).
     Deformable blocks (``blocks.dof12[i]``, see dda/_deform.py): body-frame strains and strain rates and angular
     velocity (``deform``) replace ``angmom``; ``forces.qs`` collects the strain part of T^T f. They never sleep;

@@ -39,7 +39,8 @@ DDA_KEYS = {
     "simulation.record_every": K("s", "time-series interval", default="duration / 100"),
     "simulation.frames": K("-", "VTU frames written over the run"),
     "simulation.sleep": K("", "resting blocks stop being integrated"),
-    "simulation.sleep_velocity": K("m/s", "sleep: mean speed over the window below which a block may rest (no step above ten times it)",
+    "simulation.sleep_velocity": K("m/s", "sleep: mean speed over the window below which a block may rest "
+                                          "(no step above ten times it)",
                                    absent="1e-4 sqrt(g d50), d50 the median block size (dda/simulation.py)"),
     "simulation.sleep_accel": K("m/s2", "sleep: mean acceleration over the window below which a block may rest",
                                 absent="1e-3 g (dda/simulation.py)"),

@@ -452,9 +452,9 @@ def test_cemented_hanging_blocks_sleep_and_wake_with_their_bonds_and_closed_bala
     """Two blocks hanging in tension from a fixed roof 10 m up by cemented contacts (cohesion and tensile
     strength, bonded at the start) settle and fall asleep; a prescribed block sliding past the lower one within the
     search gap, never touching it, wakes it (its contact with the sleeping upper block then has the lower block as
-    A) and it alone (woken at rest and not moving, it wakes no others), and it falls asleep again. Every bonded point keeps its bond through it, the blocks stay where they settled
-    (stretched W / (4 kn) per contact: 1.3e-5 m and 1.9e-5 m), nothing moves once asleep, and the energy balance of
-    every step is closed, the steps where blocks fall asleep and wake included (a block falling asleep counted its
+    A) and it alone (woken at rest and not moving, it wakes no others), and it falls asleep again. Every bonded
+    point keeps its bond through it, the blocks stay where they settled (stretched W / (4 kn) per contact: 1.3e-5 m
+    and 1.9e-5 m), nothing moves once asleep, and the energy balance of every step is closed, the steps where blocks fall asleep and wake included (a block falling asleep counted its
     potential twice in that step, a block waking not at all: 2.2e5 J here, taken for a blow-up)."""
     bs = BlockSystem()
     roof = bs.add_block(box((-2, -2, 10), (2, 2, 11)), fixed=True)
