@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from ._broad import build_grid, buckets_for, find_pairs, inside_cells, map_cells, n_cells
-from ._contact import local_damping
+from ._contact import dashpot_scale, local_damping
 from ._deform import deform_geometry, deform_step
 from ._fcp import MAXP
 from ._kinematics import ang_vel, place_vertices, quat_matrix, turn, turned
@@ -310,6 +310,7 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         blocks.mass
     kin, dof12, wpres, size_b = blocks.kin, blocks.dof12, blocks.wpres, blocks.size_b
     force, torque, gravity, bforce = forces.force, forces.torque, loads.gravity, loads.bforce
+    dsum, dscale = forces.dsum, forces.dscale
     pl_start, pl_r, pl_f = loads.pl_start, loads.pl_r, loads.pl_f
     R, w_old, w_new, Lnew, qh = work.R, work.w_old, work.w_new, work.Lnew, work.qh
     par, calm, sw, ke_step, woke = sleep.par, sleep.calm, sleep.sw, sleep.ke, sleep.woke
@@ -319,6 +320,7 @@ def integrate(dt, dt_prev, local_damp, blocks, deform, loads, forces, active, sl
         if kin[i]:
             _prescribed_step(i, dt, pos, vel, quat, wpres, force, torque, acc, qh)
             continue
+        dscale[i] = dashpot_scale(dsum, i, dt, local_damp)
         if dof12[i]:
             ke_i, pe_i, es_i, dl_i, bl_i = deform_step(i, dt, dtavg, local_damp, blocks, deform, loads, forces)
             tally[T_KIN] += ke_i

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._contact import point_force
+from ._contact import add_dashpots, point_force
 from ._deform import add_strain_force, body_point, point_velocity
 from ._fcp import MAXP, clip_line, contact_points, fcp, gap_along, polygon_area, sat_search
 from ._kinds import intact_share, law_face, point_row
@@ -281,7 +281,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
     vel, quat, fixed, dof12 = blocks.vel, blocks.quat, blocks.fixed, blocks.dof12
     wpres, inertia, angmom = blocks.wpres, blocks.inertia, blocks.angmom
     strain, srate, wb = deform.strain, deform.srate, deform.wb
-    force, torque, qs = forces.force, forces.torque, forces.qs
+    force, torque, qs, dsum, dscale = forces.force, forces.torque, forces.qs, forces.dsum, forces.dscale
     face_row, face_shape, face_geo, intact_row = law.face_row, law.face_shape, law.face_geo, law.intact_row
     kinds = len(face_row) > 0
     pos_old, a_old, b_old, nhe = con.pos[old], con.a[old], con.b[old], he_origin.shape[0]
@@ -398,6 +398,7 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
             # 4. the contact law at each point
             apt = polygon_area(p_pos, k, nrm) / k
             meff = _effective_mass(kin[i], kin[j], static[j], mass[i], mass[j])
+            dsc = dscale[i] if static[j] else min(dscale[i], dscale[j])
             count[C_CONTACTS] += 1
             kn, kt, tanphi = lawtab[mi, mj, LAW_KN], ks, lawtab[mi, mj, LAW_TANPHI]
             coh, ten, zeta = lawtab[mi, mj, LAW_COH], lawtab[mi, mj, LAW_TEN], lawtab[mi, mj, LAW_ZETA]
@@ -512,8 +513,18 @@ def narrow_phase(npair, pa, pb, hmask, first_step, dt, law, gap, blocks, deform,
                     # last step's point opens; its springs' and damping force's second halves (see below)
                     _book_gone(tally, e_open, kt, us, vrel[0], vrel[1], vrel[2], nrm, dt, fd0, fd1, fd2)
                     continue
-                st, bonded, fn_el, ee, df, dd = point_force(kn, kt, tanphi, coh * apt, ten * apt, zeta, meff,
+                st, bonded, fn_el, ee, df, dd = point_force(kn, kt, tanphi, coh * apt, ten * apt, zeta * dsc, meff,
                                                             p_depth[q], nrm, vrel, dt, us, bonded, fpt)
+                if zeta > 0.0 and st != 0:
+                    # this point's nominal dashpots in its blocks' rates (dda/_contact.py: dashpot_scale)
+                    cn = 2.0 * zeta * np.sqrt(kn * meff)
+                    cs = 2.0 * zeta * np.sqrt(kt * meff) if st == 1 else 0.0
+                    if not kin[i]:
+                        add_dashpots(dsum, i, cn, cs, mass[i], inertia[i], quat[i], p_pos[q, 0] - pos[i, 0],
+                                     p_pos[q, 1] - pos[i, 1], p_pos[q, 2] - pos[i, 2], nrm[0], nrm[1], nrm[2])
+                    if not static[j] and not kin[j]:
+                        add_dashpots(dsum, j, cn, cs, mass[j], inertia[j], quat[j], p_pos[q, 0] - pos[j, 0],
+                                     p_pos[q, 1] - pos[j, 1], p_pos[q, 2] - pos[j, 2], nrm[0], nrm[1], nrm[2])
                 tally[T_ELASTIC] += ee
                 tally[T_FRICTION] += df
                 # the work of a force in the product-form kinetic energy takes the half-step velocities on both

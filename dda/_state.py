@@ -21,7 +21,8 @@ Deform = namedtuple("Deform", "strain srate wb m9 m9inv vc")
 # per-step force, torque and strain force (the spheres' reactions; empty arrays for block-only runs)
 Loads = namedtuple("Loads", "gravity bforce pl_start pl_r pl_f fext text qext")
 # the forces of one step: world force and torque about the centroid, strain part of T^T f (deformable blocks)
-Forces = namedtuple("Forces", "force torque qs")
+# dsum, dscale: each block's dashpot rates this step and its dashpots' scale (dda/_contact.py)
+Forces = namedtuple("Forces", "force torque qs dsum dscale")
 # per-block ranges (vs, fs, es) of the body-frame vertices / face planes, their world images, boxes, half-edges
 Geometry = namedtuple("Geometry", "vs fs es vloc nloc dloc vert fnw fdw aabb "
                                   "he_origin he_next he_pair he_face vert_he edge_he")

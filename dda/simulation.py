@@ -249,6 +249,8 @@ class Simulation:
         self._alloc_contacts(max(256, 4 * nb))
         self.force = np.zeros((nb, 3))
         self.torque = np.zeros((nb, 3))
+        self.dsum = np.zeros((nb, 21))
+        self.dscale = np.ones(nb)
         # external force / torque / strain force per block at each step (spheres' reactions; empty: none)
         self.fext = np.zeros((0, 3))
         self.text = np.zeros((0, 3))
@@ -343,7 +345,7 @@ class Simulation:
                    A.material, self.size_b, self.dof12),
             Deform(self.strain_, self.srate, self.wb, A.m9, A.m9inv, A.vc),
             Loads(self.gravity, A.bforce, A.pl_start, A.pl_r, A.pl_f, self.fext, self.text, self.qext),
-            Forces(self.force, self.torque, self.qs),
+            Forces(self.force, self.torque, self.qs, self.dsum, self.dscale),
             Geometry(A.vert_start, A.face_start, A.edge_start, A.vloc, A.nloc, A.dloc, self.vert, self.fnw,
                      self.fdw, self.aabb, A.he_origin, A.he_next, A.he_pair, A.he_face, A.vert_he, A.edge_he),
             Grid(self.S, self.margin, self.gap, self.cellbox, self.large, self.stamp, self.tag),

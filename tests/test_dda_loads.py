@@ -241,6 +241,52 @@ def test_local_damping_lowers_the_stable_step_by_sqrt_one_plus_alpha(alpha, frac
     assert Simulation(bs, law, local_damping=0.8).dt_crit == pytest.approx(Simulation(bs, law).dt_crit / math.sqrt(1.8))
 
 
+def _cube_on_dashpots_rate(zeta, kn, ks, m):
+    """The largest eigenvalue of M^-1 C for the cube of _cube_on_springs_omega_max on four corner dashpots
+    cn = 2 zeta sqrt(kn m), cs = 2 zeta sqrt(ks m) (the point dashpots of dda/_contact.py on a fixed floor)."""
+    cn, cs = 2 * zeta * math.sqrt(kn * m), 2 * zeta * math.sqrt(ks * m)
+    return _cube_on_springs_omega_max(cn, cs, m) ** 2
+
+
+@pytest.mark.parametrize("zeta, frac", [(0.5, 0.8), (0.1, None)])
+def test_overshooting_dashpots_are_scaled_to_stop_a_block_in_one_step_not_turn_it_back(zeta, frac):
+    """An explicit dashpot c on a mass m multiplies the velocity by 1 - dt c / m each step: past 1 it turns the
+    velocity back, past 2 it blows up. A cube on its four corner dashpots at zeta = 0.5 and omega_max dt = 0.8
+    (springs stable) has dt lambda_max(M^-1 C) = 2.97 (the eigenvalues of its 6 x 6 damping and mass): unscaled,
+    its rocking would grow at every step (it did: 3.7 mm/s after 400 steps from 2.4, the dashpots making energy).
+    The engine scales the block's dashpots so that dt times that rate is 1: the cube comes to rest and the books
+    stay closed. At zeta = 0.1 and the engine's own step the dashpots
+    stay exactly as they are (scale 1)."""
+    kn, ks, m = 1e9, 5e8, 2600.0
+    w = _cube_on_springs_omega_max(kn, ks, m)
+    rate = _cube_on_dashpots_rate(zeta, kn, ks, m)
+    bs = BlockSystem()
+    bs.add_block(box((-2, -2, -1), (2, 2, 0)), fixed=True)
+    i = bs.add_block(box((-0.5, -0.5, 0), (0.5, 0.5, 1)))
+    law = ContactLaw(kn=kn, ks=ks, friction_deg=45.0, damping=zeta)
+    sim = Simulation(bs, law, dt=frac / w if frac else None)
+    if frac:
+        assert sim.dt * rate == pytest.approx(2.97, abs=0.01)
+    else:
+        assert sim.dt * rate < 1.0
+    sim.vel[i] = (1e-3, -2e-3, 1e-3)
+    sim.angmom[i] = np.array([1e-3, -2e-3, 1.5e-3]) * m / 6
+    first = sim.run(2 * sim.dt, record_every=sim.dt).energy_column("balance_error")[-1]
+    res = sim.run(400 * sim.dt, record_every=50 * sim.dt)
+    if frac:
+        assert 0.0 < sim.dscale[i] < 1.0
+        # scaled to dt lambda_max = 1 exactly (the engine's eigenvalue against numpy's)
+        assert sim.dt * rate * sim.dscale[i] == pytest.approx(1.0, rel=1e-4)
+    else:
+        assert sim.dscale[i] == 1.0
+    assert np.linalg.norm(sim.vel[i]) < 1e-6
+    damped = res.energy_column("damping")[-1]
+    assert damped > 0.9 * (0.5 * m * 6e-6 + 0.5 * (m / 6) * 7.25e-6)  # the initial kinetic energy, and its settling
+    # the books after the first two steps (the first starts from the given velocities at t = 0, and its dashpot
+    # forces are booked half in the second) stay closed
+    assert abs(res.energy_column("balance_error")[-1] - first) < 1e-6 * damped
+
+
 def test_local_damping_does_not_spin_a_needle_about_its_axis():
     """A free needle (5 m x 25 mm x 25 mm, axial inertia 2e-5 of the transverse one, axis tilted out of the world
     axes) under a couple about a transverse axis, turning about the transverse axes, local damping 0.5: torque
