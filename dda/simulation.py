@@ -474,8 +474,9 @@ class Simulation:
                 if left > 0 and self.steps % rec_steps:
                     continue
             res.record(self)
+            asleep = f"asleep {self.n_asleep} of {len(self.movable)}  " if self.sleep_par[0] > 0 else ""
             clock.update(self.time, self.steps, f"contacts {int(self.stats[ST_CONTACTS])}  "
-                         f"points {int(self.stats[ST_POINTS])}  KE {e[0]:.4g} J  balance error {err:.3g} J",
+                         f"points {int(self.stats[ST_POINTS])}  {asleep}KE {e[0]:.4g} J  balance error {err:.3g} J",
                          end=left == 0)
         res.wall_s = time.perf_counter() - t_wall
         self.cpu_s += time.process_time() - t_cpu
