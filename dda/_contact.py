@@ -101,8 +101,8 @@ def add_dashpots(S, i, cn, cs, m, inertia, q, r0, r1, r2, n0, n1, n2):
 @njit(cache=True)
 def _largest_eigenvalue(S, i):
     """The largest eigenvalue of the symmetric positive semi-definite 6 x 6 matrix S[i] (upper triangle): power
-    iteration from a vector with no symmetry (not orthogonal to the modes of symmetric blocks), its Rayleigh quotient (from below; additions, products, divisions and square roots
-    only, the same bits on every CPU)."""
+    iteration from a vector with no symmetry (not orthogonal to the modes of symmetric blocks), its Rayleigh
+    quotient (from below; additions, products, divisions and square roots only, the same bits on every CPU)."""
     A = np.empty((6, 6))
     k = 0
     for a in range(6):
