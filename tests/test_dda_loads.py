@@ -255,8 +255,7 @@ def test_overshooting_dashpots_are_scaled_to_stop_a_block_in_one_step_not_turn_i
     (springs stable) has dt lambda_max(M^-1 C) = 2.97 (the eigenvalues of its 6 x 6 damping and mass): unscaled,
     its rocking would grow at every step (it did: 3.7 mm/s after 400 steps from 2.4, the dashpots making energy).
     The engine scales the block's dashpots so that dt times that rate is 1: the cube comes to rest and the books
-    stay closed. At zeta = 0.1 and the engine's own step the dashpots
-    stay exactly as they are (scale 1)."""
+    stay closed. At zeta = 0.1 and the engine's own step the dashpots stay exactly as they are (scale 1)."""
     kn, ks, m = 1e9, 5e8, 2600.0
     w = _cube_on_springs_omega_max(kn, ks, m)
     rate = _cube_on_dashpots_rate(zeta, kn, ks, m)
@@ -500,8 +499,9 @@ def test_cemented_hanging_blocks_sleep_and_wake_with_their_bonds_and_closed_bala
     search gap, never touching it, wakes it (its contact with the sleeping upper block then has the lower block as
     A) and it alone (woken at rest and not moving, it wakes no others), and it falls asleep again. Every bonded
     point keeps its bond through it, the blocks stay where they settled (stretched W / (4 kn) per contact: 1.3e-5 m
-    and 1.9e-5 m), nothing moves once asleep, and the energy balance of every step is closed, the steps where blocks fall asleep and wake included (a block falling asleep counted its
-    potential twice in that step, a block waking not at all: 2.2e5 J here, taken for a blow-up)."""
+    and 1.9e-5 m), nothing moves once asleep, and the energy balance of every step is closed, the steps where blocks
+    fall asleep and wake included (a block falling asleep counted its potential twice in that step, a block waking not
+    at all: 2.2e5 J here, taken for a blow-up)."""
     bs = BlockSystem()
     roof = bs.add_block(box((-2, -2, 10), (2, 2, 11)), fixed=True)
     up = bs.add_block(box((-0.5, -0.5, 9), (0.5, 0.5, 10)))
